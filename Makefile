@@ -1,0 +1,34 @@
+# make demo: install everything, generate a sample dataset, convert it.
+# make test: install everything, build, run the C++ (ctest) and Python (pytest) tests.
+SHELL := /bin/bash
+PY = $$(cat build/.python)
+WERROR ?= OFF
+
+.PHONY: all deps install test test-cpp test-python demo bench clean
+all: install
+
+deps:
+	@bash tools/install-deps.sh
+
+install: deps
+	@echo "building and installing bsp_fast (C++ core, incremental in build/wheel)"
+	@$(PY) -m pip install -q --no-build-isolation --no-deps \
+	    -Ccmake.define.BSP_WERROR=$(WERROR) . 
+
+test: install
+	@$(MAKE) --no-print-directory test-cpp test-python
+
+test-cpp:
+	ctest --test-dir build/wheel --output-on-failure -j2
+
+test-python:
+	$(PY) -m pytest -q tests/python
+
+demo: install
+	@$(PY) tools/demo.py
+
+bench: install
+	$(PY) benchmarks/bench_kinematics.py
+
+clean:
+	rm -rf build dist *.egg-info demo-out

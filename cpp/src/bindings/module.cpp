@@ -1,0 +1,70 @@
+#include <algorithm>
+#include <map>
+
+#include "bsp/diagnostics.hpp"
+#include "bsp/errors.hpp"
+#include "bsp/parallel.hpp"
+#include "common.hpp"
+
+namespace bsp::py_bind {
+
+static std::map<std::string, BindFn>& registry() {
+  static std::map<std::string, BindFn> r;  // ordered: bindings run in name order
+  return r;
+}
+
+int register_binding(const char* name, BindFn fn) {
+  registry()[name] = fn;
+  return 0;
+}
+
+void run_bindings(py::module_& m) {
+  for (auto& [name, fn] : registry()) fn(m);
+}
+
+std::string shape_str(const py::array& a) {
+  std::string s = "(";
+  for (py::ssize_t i = 0; i < a.ndim(); ++i) {
+    if (i) s += ", ";
+    s += std::to_string(a.shape(i));
+  }
+  if (a.ndim() == 1) s += ",";
+  return s + ")";
+}
+
+std::size_t leading_count(const py::array& a, const std::vector<py::ssize_t>& tail,
+                          const char* name, const char* expected) {
+  const auto nt = static_cast<py::ssize_t>(tail.size());
+  bool ok = a.ndim() >= nt;
+  for (py::ssize_t i = 0; ok && i < nt; ++i)
+    ok = tail[i] < 0 || a.shape(a.ndim() - nt + i) == tail[i];
+  if (!ok)
+    throw py::value_error(std::string(name) + ": expected shape " + expected + ", got " +
+                          shape_str(a));
+  std::size_t n = 1;
+  for (py::ssize_t i = 0; i < a.ndim() - nt; ++i) n *= static_cast<std::size_t>(a.shape(i));
+  return n;
+}
+
+}  // namespace bsp::py_bind
+
+PYBIND11_MODULE(_core, m) {
+  namespace py = pybind11;
+  m.doc() = "bsp_fast C++ core (private: use the bsp_fast package)";
+
+  auto base = py::register_exception<bsp::Error>(m, "Error", PyExc_RuntimeError);
+  py::register_exception<bsp::CsvParseError>(m, "CsvParseError", base.ptr());
+  py::register_exception<bsp::VideoDecodeError>(m, "VideoDecodeError", base.ptr());
+  py::register_exception<bsp::VideoEncodeError>(m, "VideoEncodeError", base.ptr());
+  py::register_exception<bsp::ApngError>(m, "ApngError", base.ptr());
+  py::register_exception<bsp::Hdf5Error>(m, "Hdf5Error", base.ptr());
+  py::register_exception<bsp::MotionError>(m, "MotionError", base.ptr());
+
+  m.def("library_versions", &bsp::library_versions,
+        "Versions of the C/C++ libraries the core is linked with.");
+  m.def("set_num_threads", &bsp::set_num_threads, py::arg("n"),
+        "Threads used by the core's parallel kernels (0 = all cores).");
+  m.def("num_threads", &bsp::num_threads, "Threads the core's parallel kernels use.");
+
+  bsp::py_bind::run_bindings(m);
+}

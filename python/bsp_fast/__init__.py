@@ -1,0 +1,54 @@
+"""bsp_fast: fast, complete toolkit for the CARLA-BSP pedestrian dataset."""
+from __future__ import annotations
+
+import pkgutil as _pkgutil
+
+# Lets a development build tree (PYTHONPATH=python:build/dev/py) provide `_core`.
+__path__ = _pkgutil.extend_path(__path__, __name__)  # type: ignore[name-defined]
+
+__version__ = "0.1.0"
+
+from ._native import core as _core  # noqa: E402
+from .geometry import (  # noqa: E402
+    compose,
+    forward_kinematics,
+    in_frame,
+    invert,
+    mesh_offset,
+    project,
+    rotation_matrix,
+    rotation_to_euler,
+    to_world,
+    transform_points,
+)
+from . import skeleton  # noqa: E402
+
+Error = _core.Error
+CsvParseError = _core.CsvParseError
+VideoDecodeError = _core.VideoDecodeError
+VideoEncodeError = _core.VideoEncodeError
+ApngError = _core.ApngError
+Hdf5Error = _core.Hdf5Error
+MotionError = _core.MotionError
+set_num_threads = _core.set_num_threads
+num_threads = _core.num_threads
+
+
+def diagnostics() -> dict:
+    """Package version, Python and NumPy versions, and the linked C/C++ library versions."""
+    import platform
+
+    import numpy
+
+    info = {"bsp_fast": __version__, "python": platform.python_version(),
+            "numpy": numpy.__version__, "threads": _core.num_threads()}
+    info.update(dict(_core.library_versions()))
+    return info
+
+
+__all__ = [
+    "compose", "forward_kinematics", "in_frame", "invert", "mesh_offset", "project",
+    "rotation_matrix", "rotation_to_euler", "to_world", "transform_points", "skeleton",
+    "diagnostics", "Error", "CsvParseError", "VideoDecodeError", "VideoEncodeError",
+    "ApngError", "Hdf5Error", "MotionError", "set_num_threads", "num_threads",
+]
