@@ -31,8 +31,8 @@ void project_batch(const double* points, std::size_t n, const double* cams, std:
   const double f = k.focal(), cx = k.width / 2, cy = k.height / 2;
   parallel_for(n, 8192, [&](std::size_t lo, std::size_t hi) {
     std::size_t cached = SIZE_MAX;
-    Mat3 Rt;
-    Vec3 tc;
+    Mat3 Rt = Mat3::Identity();
+    Vec3 tc = Vec3::Zero();
     for (std::size_t i = lo; i < hi; ++i) {
       const std::size_t ci = i / kc;
       if (ci != cached) {
