@@ -1,0 +1,66 @@
+// PNG building blocks shared by the APNG writer and reader: big-endian integers, chunk CRCs,
+// the five row filters and RAII for libdeflate (the only compression library we use).
+#pragma once
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+
+struct libdeflate_compressor;
+struct libdeflate_decompressor;
+
+namespace bsp::png {
+
+inline constexpr std::uint8_t kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+
+inline std::uint32_t get_u32(const std::uint8_t* p) {
+  return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) |
+         std::uint32_t{p[3]};
+}
+inline std::uint16_t get_u16(const std::uint8_t* p) {
+  return static_cast<std::uint16_t>((p[0] << 8) | p[1]);
+}
+inline void put_u32(std::uint8_t* p, std::uint32_t v) {
+  p[0] = static_cast<std::uint8_t>(v >> 24);
+  p[1] = static_cast<std::uint8_t>(v >> 16);
+  p[2] = static_cast<std::uint8_t>(v >> 8);
+  p[3] = static_cast<std::uint8_t>(v);
+}
+inline void put_u16(std::uint8_t* p, std::uint16_t v) {
+  p[0] = static_cast<std::uint8_t>(v >> 8);
+  p[1] = static_cast<std::uint8_t>(v);
+}
+
+// CRC-32 of a chunk: over its 4-byte type followed by its data (not the length).
+std::uint32_t chunk_crc(const std::uint8_t* type, const std::uint8_t* data, std::size_t size);
+
+enum Filter : std::uint8_t { kNone = 0, kSub = 1, kUp = 2, kAverage = 3, kPaeth = 4 };
+
+// Reverses filter `type` on one row of `len` bytes in place. `prev` is the previous
+// unfiltered row, or null for the first row of an image (PNG treats it as zeros); `bpp` is
+// bytes per complete pixel (>= 1). Returns false for an unknown filter type.
+bool unfilter_row(std::uint8_t type, std::uint8_t* row, const std::uint8_t* prev, std::size_t len,
+                  std::size_t bpp);
+
+// Applies filter `type` to `row` (prev as above) and writes the filtered bytes to `out`.
+void filter_row(std::uint8_t type, const std::uint8_t* row, const std::uint8_t* prev,
+                std::size_t len, std::size_t bpp, std::uint8_t* out);
+
+// The writer's cheap filter choice for indexed rows: Up when the row above is mostly equal
+// (long runs of zeros deflate best), None otherwise. See choose_filter's comment for the
+// measurements behind it.
+std::uint8_t choose_filter(const std::uint8_t* row, const std::uint8_t* prev, std::size_t len);
+
+struct CompressorDeleter {
+  void operator()(libdeflate_compressor* p) const noexcept;
+};
+struct DecompressorDeleter {
+  void operator()(libdeflate_decompressor* p) const noexcept;
+};
+using Compressor = std::unique_ptr<libdeflate_compressor, CompressorDeleter>;
+using Decompressor = std::unique_ptr<libdeflate_decompressor, DecompressorDeleter>;
+
+// Null on allocation failure (callers throw their own typed error naming the file).
+Compressor make_compressor(int level);
+Decompressor make_decompressor();
+
+}  // namespace bsp::png
