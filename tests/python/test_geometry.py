@@ -235,3 +235,19 @@ def test_diagnostics_lists_libraries():
     d = bf.diagnostics()
     for key in ("bsp_fast", "ffmpeg", "opencv", "hdf5", "eigen", "assimp"):
         assert d[key]
+
+
+def test_gimbal_lock_matrices_round_trip_in_batches():
+    pyr = np.array([[90, 30, 20], [-90, -45, 10], [90, 0, 0]] * 100, float)
+    R = bf.rotation_matrix(pyr)
+    back = bf.rotation_to_euler(R)
+    assert np.all(back[:, 2] == 0)  # roll folded into yaw at gimbal lock
+    np.testing.assert_allclose(bf.rotation_matrix(back), R, atol=1e-9)
+
+
+def test_nan_propagates_through_batches():
+    rel = np.tile(sk.reference_pose("sk_female"), (3, 1, 1))
+    rel[1, 4, 3] = np.nan
+    A = bf.forward_kinematics(rel)
+    assert np.isfinite(A[0]).all() and np.isfinite(A[2]).all()
+    assert np.isnan(A[1, 4:8, 3:]).any()  # the bone and its descendants
