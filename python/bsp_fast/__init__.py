@@ -22,6 +22,7 @@ from .geometry import (  # noqa: E402
     transform_points,
 )
 from . import skeleton  # noqa: E402
+from .csvio import read_csv, write_csv  # noqa: E402
 
 Error = _core.Error
 CsvParseError = _core.CsvParseError

@@ -1,0 +1,361 @@
+#include <doctest/doctest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bsp/csv.hpp"
+#include "bsp/errors.hpp"
+
+using namespace bsp;
+namespace fs = std::filesystem;
+
+namespace {
+
+// Python's repr() of doubles, generated once with python3 (struct.pack('<d', v)).
+struct ReprCase {
+  unsigned long long bits;
+  const char* repr;
+};
+const ReprCase kReprCases[] = {
+    {0x0000000000000000ULL, "0.0"},
+    {0x8000000000000000ULL, "-0.0"},
+    {0x3ee4f8b588e368f1ULL, "1e-05"},
+    {0x3f1a36e2eb1c432dULL, "0.0001"},
+    {0x4341c37937e08000ULL, "1e+16"},
+    {0x42dc12218377de40ULL, "123456789012345.0"},
+    {0x43118b54f22aeb00ULL, "1234567890123456.0"},
+    {0x4341c37937e07fffULL, "9999999999999998.0"},
+    {0x3ff19999a0000000ULL, "1.100000023841858"},  // 1.1f widened
+    {0xc020428f60000000ULL, "-8.130000114440918"},
+    {0x4056800000000000ULL, "90.0"},
+    {0xc056800000000000ULL, "-90.0"},
+    {0x3fe0000000000000ULL, "0.5"},
+    {0x3ff8000000000000ULL, "1.5"},
+    {0x4059000000000000ULL, "100.0"},
+    {0x3f23a92a30553262ULL, "0.00015000000000000001"},
+    {0x3f202e4b6ce5dc68ULL, "0.00012345"},
+    {0x7ff8000000000000ULL, "nan"},
+    {0xfff8000000000000ULL, "nan"},  // -nan prints as nan too
+    {0x7ff0000000000000ULL, "inf"},
+    {0xfff0000000000000ULL, "-inf"},
+    {0x0000000000000001ULL, "5e-324"},  // subnormals
+    {0x0010000000000000ULL, "2.2250738585072014e-308"},
+    {0x36a0000000000000ULL, "1.401298464324817e-45"},  // smallest float32 subnormal
+    {0x37a16c2000000000ULL, "9.99994610111476e-41"},   // 1e-40f widened
+    {0x7fefffffffffffffULL, "1.7976931348623157e+308"},
+    {0x4480f0cf064dd592ULL, "1e+22"},
+    {0x54b249ad2594c37dULL, "1e+100"},
+    {0x2b2bff2ee48e0530ULL, "1e-100"},
+    {0x405edd2f1a9fbe77ULL, "123.456"},
+    {0x3fb999999999999aULL, "0.1"},
+    {0x3fd5555555555555ULL, "0.3333333333333333"},
+    {0x3fb99999a0000000ULL, "0.10000000149011612"},
+    {0x4341c37940000000ULL, "1.0000000272564224e+16"},
+    {0x47efffffe0000000ULL, "3.4028234663852886e+38"},
+    {0x41678c29c0000000ULL, "12345678.0"},
+    {0x4340000000000000ULL, "9007199254740992.0"},
+    {0x43b0000000000000ULL, "1.152921504606847e+18"},
+    {0x41807a8ea0000000ULL, "34558420.0"},
+    {0x412912e440000000ULL, "821618.125"},
+    {0x3e962cdda0000000ULL, "3.304370750356611e-07"},
+    {0xbe4bfc2ec0000000ULL, "-1.3031572265731484e-08"},
+    {0x42d495dd60000000ULL, "90535586955264.0"},
+    {0x4224c93300000000ULL, "44637454336.0"},
+    {0xc29388c440000000ULL, "-5369532252160.0"},
+    {0x40ec5ffa00000000ULL, "58111.8125"},
+};
+
+std::string pyfloat(double v) {
+  char buf[kPyFloatMaxChars];
+  return std::string(buf, format_pyfloat(v, buf));
+}
+
+// A scratch directory removed at the end of each test.
+struct TempDir {
+  fs::path dir;
+  TempDir() {
+    static int n = 0;
+    dir = fs::temp_directory_path() /
+          ("bsp_test_csv_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
+    fs::create_directories(dir);
+  }
+  ~TempDir() { fs::remove_all(dir); }
+  std::string write(const std::string& name, const std::string& text) const {
+    const std::string p = (dir / name).string();
+    std::ofstream(p, std::ios::binary) << text;
+    return p;
+  }
+};
+
+std::string number_list(std::size_t n, float base) {
+  std::string s = "[";
+  for (std::size_t i = 0; i < n; ++i) s += (i ? ", " : "") + pyfloat(base + 0.25f * i);
+  return s + "]";
+}
+
+std::string nested_list(std::size_t outer, std::size_t inner, float base) {
+  std::string s = "[";
+  for (std::size_t j = 0; j < outer; ++j)
+    s += (j ? ", " : "") + number_list(inner, base + static_cast<float>(j));
+  return s + "]";
+}
+
+// A cell as pandas quotes it.
+std::string csvq(const std::string& s) {
+  if (s.find_first_of(",\"") == std::string::npos) return s;
+  std::string q = "\"";
+  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+
+// The 24 cells of a valid row in writer order; frame picks frame.idx and the numbers.
+std::vector<std::string> row_cells(int frame, const std::string& id = "clip-a") {
+  const float b = static_cast<float>(frame);
+  const auto q = [](const std::string& s) { return "\"" + s + "\""; };
+  return {csvq(id), "/Game/Carla/Maps/Town04", "0", q(number_list(6, b)), "1600", "600", "0",
+          "walker.pedestrian.0001", "adult", "female", q(number_list(6, 1 + b)),
+          std::to_string(frame), csvq("clips/" + id + "-0.mp4"), csvq("clips/" + id + "-1.apng"), "100",
+          q(number_list(6, 2 + b)), q(number_list(3, 3 + b)), q(nested_list(26, 6, 4 + b)),
+          q(nested_list(26, 6, 5 + b)), q(nested_list(26, 6, 6 + b)), "True",
+          q(nested_list(26, 2, 7 + b)), "False", ""};
+}
+
+std::string join(const std::vector<std::string>& cells, const char* eol = "\n") {
+  std::string s;
+  for (std::size_t k = 0; k < cells.size(); ++k) s += (k ? "," : "") + cells[k];
+  return s + eol;
+}
+
+std::string header_line() {
+  return join(std::vector<std::string>(kPoseCsvColumns.begin(), kPoseCsvColumns.end()));
+}
+
+std::string error_of(const std::string& path, const CsvReadOptions& opt = {}) {
+  try {
+    read_pose_csv(path, opt);
+  } catch (const CsvParseError& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+}  // namespace
+
+TEST_CASE("format_pyfloat matches Python's repr") {
+  for (const ReprCase& c : kReprCases) {
+    double v;
+    std::memcpy(&v, &c.bits, sizeof v);
+    CHECK_MESSAGE(pyfloat(v) == c.repr, c.repr);
+  }
+}
+
+TEST_CASE("format_pyfloat round-trips random float32 values") {
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<std::uint32_t> bits;
+  for (int i = 0; i < 20000; ++i) {
+    std::uint32_t b = bits(rng);
+    float f;
+    std::memcpy(&f, &b, sizeof f);
+    if (!std::isfinite(f)) continue;
+    const std::string s = pyfloat(static_cast<double>(f));
+    REQUIRE(std::strtod(s.c_str(), nullptr) == static_cast<double>(f));
+  }
+}
+
+TEST_CASE("read_pose_csv parses a tiny file") {
+  TempDir tmp;
+  std::string text = header_line() + join(row_cells(3)) + join(row_cells(5));
+  const std::string path = tmp.write("data.csv", text);
+  const PoseTable t = read_pose_csv(path);
+  REQUIRE(t.rows == 2);
+  CHECK(t.line == std::vector<std::int64_t>{2, 3});
+  CHECK(t.frame_idx == std::vector<std::int64_t>{3, 5});
+  CHECK(t.camera_width[1] == 1600);
+  CHECK(t.id.values == std::vector<std::string>{"clip-a"});
+  CHECK(t.id.codes == std::vector<std::int32_t>{0, 0});
+  CHECK(t.map.values[0] == "/Game/Carla/Maps/Town04");
+  CHECK(t.camera_transform[0] == 3.0f);
+  CHECK(t.camera_transform[5] == 3.0f + 1.25f);
+  CHECK(t.velocity.size() == 6);
+  CHECK(t.velocity[3] == 8.0f);
+  // pose.world of row 1, joint 25, value 5: base 4 + 5 + 25 + 0.25 * 5.
+  CHECK(t.pose_world[1 * 156 + 25 * 6 + 5] == 4 + 5 + 25 + 1.25f);
+  CHECK(t.pose_camera[1 * 52 + 2 * 2 + 1] == 7 + 5 + 2 + 0.25f);
+  CHECK(t.is_crossing == std::vector<std::uint8_t>{1, 1});
+  CHECK(t.in_frame == std::vector<std::uint8_t>{0, 0});
+  CHECK(t.in_frame_valid == std::vector<std::uint8_t>{1, 1});
+  CHECK(t.in_segmentation_valid == std::vector<std::uint8_t>{0, 0});
+  CHECK(t.columns_present.size() == kPoseCsvColumnCount);
+  CHECK(t.crossing_column == "frame.pedestrian.is_crossing");
+}
+
+TEST_CASE("read_pose_csv goes by name: reordered columns, alias, CRLF, blank lines, NaN") {
+  TempDir tmp;
+  std::vector<std::string> names(kPoseCsvColumns.begin(), kPoseCsvColumns.end());
+  names[20] = kCrossingAlias;
+  names.push_back("extra");
+  std::vector<std::string> cells = row_cells(7);
+  cells[21] = "\"[[nan, nan], [inf, -inf]";
+  for (int j = 2; j < 26; ++j) cells[21] += ", [1e-05, 2.5]";
+  cells[21] += "]\"";
+  cells[23] = "True";
+  cells.push_back("\"ignored, text\"");
+  // Reverse the column order.
+  std::reverse(names.begin(), names.end());
+  std::reverse(cells.begin(), cells.end());
+  const std::string text = join(names, "\r\n") + "\r\n" + join(cells, "\r\n") + "\r\n";
+  const PoseTable t = read_pose_csv(tmp.write("r.csv", text));
+  REQUIRE(t.rows == 1);
+  CHECK(t.line[0] == 3);
+  CHECK(t.crossing_column == kCrossingAlias);
+  CHECK(t.is_crossing[0] == 1);
+  CHECK(std::isnan(t.pose_camera[0]));
+  CHECK(std::isinf(t.pose_camera[2]));
+  CHECK(t.pose_camera[3] < 0);
+  CHECK(t.pose_camera[4] == 1e-05f);
+  CHECK(t.in_segmentation[0] == 1);
+  CHECK(t.in_segmentation_valid[0] == 1);
+  CHECK(t.frame_idx[0] == 7);
+  CHECK(t.recording.values[0] == "clips/clip-a-0.mp4");
+}
+
+TEST_CASE("read_pose_csv reads only the requested columns") {
+  TempDir tmp;
+  const std::string path = tmp.write("d.csv", header_line() + join(row_cells(1)));
+  CsvReadOptions opt;
+  opt.columns = {"frame.pedestrian.pose.world", kCrossingAlias};
+  opt.check_duplicates = false;
+  const PoseTable t = read_pose_csv(path, opt);
+  CHECK(t.pose_world.size() == 156);
+  CHECK(t.is_crossing.size() == 1);
+  CHECK(t.pose_relative.empty());
+  CHECK(t.id.codes.empty());
+  CHECK(t.columns_present ==
+        std::vector<std::string>{"frame.pedestrian.pose.world", "frame.pedestrian.is_crossing"});
+  opt.columns = {"no.such.column"};
+  CHECK_THROWS_AS(read_pose_csv(path, opt), std::invalid_argument);
+}
+
+TEST_CASE("write_pose_csv then read_pose_csv round-trips, for any thread count") {
+  TempDir tmp;
+  std::string text = header_line();
+  for (int f = 0; f < 300; ++f) text += join(row_cells(f, f < 150 ? "clip-a" : "clip, \"b\""));
+  const std::string src = tmp.write("src.csv", text);
+  CsvReadOptions one, two;
+  one.threads = 1;
+  two.threads = 2;
+  const PoseTable a = read_pose_csv(src, one), b = read_pose_csv(src, two);
+  CHECK(a.id.values == std::vector<std::string>{"clip-a", "clip, \"b\""});
+  CHECK(a.id.codes == b.id.codes);
+  CHECK(a.recording.values == b.recording.values);
+  CHECK(a.pose_world == b.pose_world);
+  CHECK(a.pose_camera == b.pose_camera);
+  CHECK(a.frame_idx == b.frame_idx);
+  const std::string out = (tmp.dir / "out.csv").string();
+  // The hand-written cells are what pandas writes, so the writer must reproduce them.
+  write_pose_csv(out, a, 2);
+  std::ifstream in(out, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  CHECK(ss.str() == text);
+  write_pose_csv(out, b, 1);
+  std::ifstream in2(out, std::ios::binary);
+  std::stringstream ss2;
+  ss2 << in2.rdbuf();
+  CHECK(ss2.str() == text);
+  CHECK(!fs::exists(out + ".tmp"));
+  CHECK(std::distance(fs::directory_iterator(tmp.dir), fs::directory_iterator()) == 2);
+}
+
+TEST_CASE("read_pose_csv errors name the file, line, column, expected and found") {
+  TempDir tmp;
+  const std::string head = header_line();
+  const auto with = [&](int col, const std::string& cell) {
+    std::vector<std::string> cells = row_cells(2);
+    cells[static_cast<std::size_t>(col)] = cell;
+    return head + join(row_cells(1)) + join(cells);
+  };
+  SUBCASE("missing column") {
+    std::vector<std::string> names(kPoseCsvColumns.begin(), kPoseCsvColumns.end() - 1);
+    const std::string p = tmp.write("m.csv", join(names));
+    const std::string e = error_of(p);
+    CHECK(e.find(p + ", line 1 (header): missing required column "
+                     "'frame.pedestrian.pose.in_segmentation'") != std::string::npos);
+  }
+  SUBCASE("wrong number of lists") {
+    const std::string p = tmp.write("l.csv", with(17, "\"" + nested_list(25, 6, 0) + "\""));
+    CHECK(error_of(p) == p + ", line 3, column 'frame.pedestrian.pose.world': expected 26 x 6 "
+                             "numbers, got 25 lists");
+  }
+  SUBCASE("wrong inner length") {
+    std::string cell = nested_list(26, 6, 0);
+    cell.replace(cell.find("], ["), 0, ", 9.0");
+    const std::string p = tmp.write("i.csv", with(19, "\"" + cell + "\""));
+    CHECK(error_of(p) == p + ", line 3, column 'frame.pedestrian.pose.relative': expected 26 x "
+                             "6 numbers, got 7 numbers in list 1");
+  }
+  SUBCASE("flat list length") {
+    const std::string p = tmp.write("f.csv", with(16, "\"[1.0, 2.0]\""));
+    CHECK(error_of(p) == p + ", line 3, column 'frame.pedestrian.velocity': expected 3 numbers, "
+                             "got 2 numbers");
+  }
+  SUBCASE("bad number") {
+    std::string cell = nested_list(26, 2, 0);
+    cell.replace(cell.find("3.0"), 3, "3.x");
+    const std::string p = tmp.write("n.csv", with(21, "\"" + cell + "\""));
+    CHECK(error_of(p) == p + ", line 3, column 'frame.pedestrian.pose.camera': expected a number "
+                             "in list 4 at item 1, found '3.x'");
+  }
+  SUBCASE("bad int and bad bool") {
+    std::string p = tmp.write("b.csv", with(11, "12a"));
+    CHECK(error_of(p) == p + ", line 3, column 'frame.idx': expected an integer, found '12a'");
+    p = tmp.write("c.csv", with(22, "yes"));
+    CHECK(error_of(p) == p + ", line 3, column 'frame.pedestrian.pose.in_frame': expected True, "
+                             "False or an empty cell, found 'yes'");
+  }
+  SUBCASE("truncated last line") {
+    std::string text = head + join(row_cells(1)) + join(row_cells(2));
+    text.resize(text.size() - 300);
+    const std::string p = tmp.write("t.csv", text);
+    const std::string e = error_of(p);
+    INFO(e);
+    CHECK(e.find(p + ", line 3, column 'frame.pedestrian.pose.") == 0);
+    CHECK(e.find("unterminated quote") != std::string::npos);
+    CHECK(e.find("no line end: is the file truncated?") != std::string::npos);
+  }
+  SUBCASE("wrong number of cells") {
+    std::vector<std::string> cells = row_cells(2);
+    cells.pop_back();
+    cells.pop_back();
+    std::string p = tmp.write("w.csv", head + join(cells));
+    CHECK(error_of(p) == p + ", line 2, column 'frame.pedestrian.pose.in_frame': expected 24 "
+                             "cells, found 22 (the row ends before this column)");
+    cells = row_cells(2);
+    cells.push_back("x");
+    p = tmp.write("x.csv", head + join(cells));
+    CHECK(error_of(p) == p + ", line 2, column 'frame.pedestrian.pose.in_segmentation': expected "
+                             "24 cells, found 25 (extra text after the last column: 'x')");
+  }
+  SUBCASE("duplicate key") {
+    const std::string p =
+        tmp.write("d.csv", head + join(row_cells(1)) + join(row_cells(2)) + "\n" +
+                               join(row_cells(1)));
+    CHECK(error_of(p) == p + ", line 5, columns (id, camera.idx, pedestrian.idx, frame.idx): "
+                             "duplicate key ('clip-a', 0, 0, 1): expected each key once, found "
+                             "it on line 2 and line 5");
+    CsvReadOptions opt;
+    opt.check_duplicates = false;
+    CHECK(read_pose_csv(p, opt).rows == 3);
+  }
+  SUBCASE("missing file") {
+    CHECK(error_of((tmp.dir / "nope.csv").string()).find("cannot open") != std::string::npos);
+  }
+}
