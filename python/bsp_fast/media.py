@@ -146,3 +146,161 @@ class ApngWriter:
         else:
             del self._w
         return False
+
+
+# ---------------------------------------------------------------- readers
+
+
+def _indices(indices, n: int) -> np.ndarray:
+    """1-D int64 frame indices; range errors are left to the core, which names the file."""
+    if isinstance(indices, slice):
+        return np.arange(n, dtype=np.int64)[indices]
+    a = np.asarray(indices)
+    if a.ndim > 1:
+        raise ValueError(f"indices: expected a 1-D sequence of frame numbers, got shape {a.shape}")
+    if a.size and not np.issubdtype(a.dtype, np.integer):
+        raise ValueError(f"indices: expected integers, got dtype {a.dtype}")
+    return np.ascontiguousarray(a.reshape(-1), dtype=np.int64)
+
+
+class VideoReader:
+    """Threaded H.264/MP4 decoder returning RGB frames.
+
+    ``len(reader)`` is the exact number of shown frames; frame k is the k-th frame displayed.
+    ``read(indices)`` returns (K, H, W, 3) uint8 in the order asked (repeats allowed),
+    decoding forward and converting only the requested frames; ``crop=(x, y, w, h)`` cuts
+    the picture before the colour conversion. Iterating yields (H, W, 3) frames in order.
+    Errors raise ``bsp_fast.VideoDecodeError`` naming the file and the frame.
+    """
+
+    def __init__(self, path, threads: int = 0):
+        if int(threads) < 0:
+            raise ValueError(f"threads must be >= 0 (0 = one per core), got {threads}")
+        self.path = os.fspath(path)
+        self._r = _core.VideoReader(self.path, int(threads))
+
+    def __len__(self) -> int:
+        return self._r.frame_count
+
+    @property
+    def fps(self) -> float:
+        return self._r.fps
+
+    @property
+    def size(self) -> tuple:
+        """(width, height) in pixels."""
+        return (self._r.width, self._r.height)
+
+    @property
+    def codec(self) -> str:
+        return self._r.codec
+
+    def read(self, indices, crop=None) -> np.ndarray:
+        """Frames `indices` as (K, H, W, 3) uint8 RGB; `crop` = (x, y, width, height)."""
+        if crop is not None:
+            crop = tuple(int(v) for v in crop)
+            if len(crop) != 4:
+                raise ValueError(f"crop must be (x, y, width, height), got {crop}")
+        return self._r.read(_indices(indices, len(self)), crop)
+
+    def read_crops(self, indices, crops) -> np.ndarray:
+        """One crop per frame, all of the same size: crops is (K, 4) of (x, y, w, h)."""
+        idx = _indices(indices, len(self))
+        boxes = np.asarray(crops, dtype=np.int64).reshape(-1, 4)
+        if len(boxes) != len(idx) or (len(boxes) and (boxes[:, 2:] != boxes[0, 2:]).any()):
+            raise ValueError("read_crops: need one (x, y, w, h) per index, all the same size")
+        if not len(idx):
+            return np.empty((0, 0, 0, 3), np.uint8)
+        out = np.empty((len(idx), int(boxes[0, 3]), int(boxes[0, 2]), 3), np.uint8)
+        for i in np.argsort(idx, kind="stable"):  # forward order: one decoding pass
+            out[i] = self._r.read(idx[i:i + 1], tuple(int(v) for v in boxes[i]))[0]
+        return out
+
+    def __getitem__(self, k: int) -> np.ndarray:
+        return self._r.read(_indices([k], len(self)), None)[0]
+
+    def __iter__(self):
+        n, step = len(self), 8
+        for start in range(0, n, step):
+            yield from self._r.read(np.arange(start, min(start + step, n)), None)
+
+
+class ApngReader:
+    """Our APNG decoder: exact frames of animated (and plain) 8-bit PNGs.
+
+    For palette files (all CARLA-BSP segmentations) ``read`` returns the palette INDICES,
+    i.e. the semantic tags, as (K, H, W) uint8; grey files give (K, H, W), RGB/RGBA and grey
+    with alpha (K, H, W, C). Frames are composited with their dispose and blend ops.
+    ``delays`` are the seconds each frame is shown; ``video_to_apng_frames`` maps video frame
+    numbers to APNG frames for files that dropped duplicate frames.
+    Errors raise ``bsp_fast.ApngError`` naming the file, the frame and the reason.
+    """
+
+    def __init__(self, path):
+        self.path = os.fspath(path)
+        self._r = _core.ApngReader(self.path)
+
+    def __len__(self) -> int:
+        return self._r.frame_count
+
+    @property
+    def size(self) -> tuple:
+        """(width, height) in pixels."""
+        return (self._r.width, self._r.height)
+
+    @property
+    def indexed(self) -> bool:
+        return self._r.indexed
+
+    @property
+    def channels(self) -> int:
+        return self._r.channels
+
+    @property
+    def palette(self):
+        """(N, 3) uint8 palette, or None."""
+        return self._r.palette
+
+    @property
+    def delays(self) -> np.ndarray:
+        """Seconds each frame is shown (fcTL delay_num / delay_den)."""
+        return np.asarray(self._r.delays, dtype=np.float64)
+
+    @property
+    def dispose_ops(self) -> np.ndarray:
+        """fcTL dispose_op per frame: 0 NONE, 1 BACKGROUND, 2 PREVIOUS."""
+        return np.asarray(self._r.dispose_ops, dtype=np.uint8)
+
+    @property
+    def blend_ops(self) -> np.ndarray:
+        """fcTL blend_op per frame: 0 SOURCE, 1 OVER."""
+        return np.asarray(self._r.blend_ops, dtype=np.uint8)
+
+    def read(self, indices) -> np.ndarray:
+        return self._r.read(_indices(indices, len(self)))
+
+    def __getitem__(self, k: int) -> np.ndarray:
+        return self._r.read(_indices([k], len(self)))[0]
+
+    def __iter__(self):
+        n, step = len(self), 16
+        for start in range(0, n, step):
+            yield from self._r.read(np.arange(start, min(start + step, n)))
+
+    def video_to_apng_frames(self, n_video_frames: int, fps: float) -> np.ndarray:
+        """(n_video_frames,) int64: the APNG frame on screen at time k / fps, by cumulative
+        delays; -1 for video frames after the animation's total duration."""
+        if int(n_video_frames) < 0:
+            raise ValueError(f"n_video_frames must be >= 0, got {n_video_frames}")
+        return np.asarray(self._r.video_to_apng_frames(int(n_video_frames), _check_fps(fps)),
+                          dtype=np.int64)
+
+
+def video_to_apng_frames(apng, n_video_frames: int, fps: float) -> np.ndarray:
+    """Module-level form of :meth:`ApngReader.video_to_apng_frames` (path or reader)."""
+    reader = apng if isinstance(apng, ApngReader) else ApngReader(apng)
+    return reader.video_to_apng_frames(n_video_frames, fps)
+
+
+__all__ = ["TAG_NAMES", "CITYSCAPES_PALETTE", "VideoWriter", "ApngWriter", "VideoReader",
+           "ApngReader", "video_to_apng_frames"]

@@ -47,4 +47,43 @@ class ApngWriter {
   std::unique_ptr<Impl> impl_;
 };
 
+// Our APNG decoder (also reads plain PNGs as one frame). Colour types 0 (grey), 2 (RGB),
+// 3 (palette: returns the INDICES, i.e. the class tags), 4 (grey+alpha), 6 (RGBA); 8-bit,
+// non-interlaced only. Frames are composited on a cached canvas with the fcTL dispose ops
+// (NONE/BACKGROUND/PREVIOUS) and blend ops (SOURCE/OVER), so sequential reads are cheap.
+// The file is read once at open: the chunk walk checks every CRC and the frame sequence.
+// Damage found there does not stop the open: frames before the damaged one stay readable,
+// reading it or a later one throws ApngError naming the frame, the chunk and the reason.
+// Not thread-safe per object (read() takes a lock); use one reader per thread.
+class ApngReader {
+ public:
+  explicit ApngReader(std::string path);
+  ~ApngReader();
+  ApngReader(const ApngReader&) = delete;
+  ApngReader& operator=(const ApngReader&) = delete;
+
+  std::int64_t frame_count() const;
+  int width() const;
+  int height() const;
+  int channels() const;     // bytes per output pixel: 1 (indexed, grey), 2, 3 or 4
+  int colour_type() const;  // PNG colour type of the file
+  bool indexed() const;     // colour type 3: read() returns palette indices
+  std::vector<std::uint8_t> palette() const;  // PLTE as RGB triplets (empty if none)
+  std::vector<double> delays() const;         // seconds each frame is shown
+  std::vector<std::uint8_t> dispose_ops() const;
+  std::vector<std::uint8_t> blend_ops() const;
+
+  // Writes the composited frames `indices` (any order, repeats allowed) to `out`, which
+  // holds indices.size() * height * width * channels bytes.
+  void read(const std::vector<std::int64_t>& indices, std::uint8_t* out);
+
+  // For each video frame k (shown at k / fps), the APNG frame on screen at that time by the
+  // cumulative delays; -1 once the animation's total duration has passed.
+  std::vector<std::int64_t> video_to_apng_frames(std::int64_t n_video_frames, double fps) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 }  // namespace bsp

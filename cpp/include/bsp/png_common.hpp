@@ -50,6 +50,19 @@ void filter_row(std::uint8_t type, const std::uint8_t* row, const std::uint8_t* 
 // measurements behind it.
 std::uint8_t choose_filter(const std::uint8_t* row, const std::uint8_t* prev, std::size_t len);
 
+// APNG blend_op OVER for one row of `n` pixels, destination `dst` updated in place.
+// With an alpha channel (`channels` bytes per pixel, alpha last): Porter-Duff "over" with
+// FFmpeg's rounding, so results equal FFmpeg's APNG decoder bit for bit.
+void blend_over_alpha(std::uint8_t* dst, const std::uint8_t* src, std::size_t n,
+                      std::size_t channels);
+// Palette indices with a tRNS alpha table: a fully transparent source index keeps the
+// canvas; any other index replaces it (indices cannot be mixed).
+void blend_over_palette(std::uint8_t* dst, const std::uint8_t* src, std::size_t n,
+                        const std::uint8_t* alpha256);
+// Grey or RGB with a tRNS colour key: source pixels equal to `key` keep the canvas.
+void blend_over_key(std::uint8_t* dst, const std::uint8_t* src, std::size_t n,
+                    std::size_t channels, const std::uint8_t* key);
+
 struct CompressorDeleter {
   void operator()(libdeflate_compressor* p) const noexcept;
 };

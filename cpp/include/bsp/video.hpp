@@ -37,4 +37,41 @@ class VideoWriter {
   std::unique_ptr<Impl> impl_;
 };
 
+// A rectangle of the picture in pixels; width or height 0 means the full picture.
+struct Crop {
+  int x = 0, y = 0, width = 0, height = 0;
+};
+
+// Decodes an MP4 (any FFmpeg-readable video) with libavcodec's threaded decoder. Frame k is
+// the k-th frame displayed, counted from the first, after FFmpeg applies edit lists and
+// B-frame reordering. The frame count is exact: it counts the packets that produce a shown
+// frame (not the container's nb_frames); if decoding ends earlier, reads past the end
+// throw. read() decodes sequentially (seeking to a keyframe only to skip ahead or go back)
+// and converts only the requested frames, cropping before the colour conversion.
+// Decoding errors throw VideoDecodeError naming the file and the frame. Not thread-safe
+// per object (read() takes a lock); use one reader per thread or process.
+class VideoReader {
+ public:
+  // threads: decoder threads, 0 = one per core.
+  explicit VideoReader(std::string path, int threads = 0);
+  ~VideoReader();
+  VideoReader(const VideoReader&) = delete;
+  VideoReader& operator=(const VideoReader&) = delete;
+
+  std::int64_t frame_count() const;
+  double fps() const;  // average frame rate of the stream
+  int width() const;
+  int height() const;
+  std::string codec() const;
+  const std::string& path() const;
+
+  // Frames `indices` (any order, repeats allowed) as RGB24, cropped to `crop`, into `out`
+  // of indices.size() * crop height * crop width * 3 bytes.
+  void read(const std::vector<std::int64_t>& indices, std::uint8_t* out, const Crop& crop = {});
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 }  // namespace bsp

@@ -4,6 +4,8 @@
 #include "bsp/video.hpp"
 #include "common.hpp"
 
+#include <optional>
+
 namespace bsp::py_bind {
 namespace {
 
@@ -42,6 +44,44 @@ std::unique_ptr<ApngWriter> make_apng_writer(std::string path, int width, int he
                                       level);
 }
 
+std::vector<std::int64_t> index_list(const CArray<std::int64_t>& indices) {
+  if (indices.ndim() > 1)
+    throw py::value_error("indices: expected a 1-D array, got shape " + shape_str(indices));
+  return std::vector<std::int64_t>(indices.data(), indices.data() + indices.size());
+}
+
+CArray<std::uint8_t> video_read(VideoReader& r, const CArray<std::int64_t>& indices,
+                                std::optional<std::array<int, 4>> crop) {
+  Crop c;
+  if (crop) c = Crop{(*crop)[0], (*crop)[1], (*crop)[2], (*crop)[3]};
+  const std::vector<std::int64_t> idx = index_list(indices);
+  const py::ssize_t w = c.width ? c.width : r.width() - c.x;
+  const py::ssize_t h = c.height ? c.height : r.height() - c.y;
+  auto out = empty<std::uint8_t>({static_cast<py::ssize_t>(idx.size()), std::max<py::ssize_t>(h, 0),
+                                  std::max<py::ssize_t>(w, 0), 3});
+  py::gil_scoped_release nogil;
+  r.read(idx, out.mutable_data(), c);
+  return out;
+}
+
+CArray<std::uint8_t> apng_read(ApngReader& r, const CArray<std::int64_t>& indices) {
+  const std::vector<std::int64_t> idx = index_list(indices);
+  std::vector<py::ssize_t> shape = {static_cast<py::ssize_t>(idx.size()), r.height(), r.width()};
+  if (!r.indexed() && r.channels() > 1) shape.push_back(r.channels());
+  auto out = empty<std::uint8_t>(shape);
+  py::gil_scoped_release nogil;
+  r.read(idx, out.mutable_data());
+  return out;
+}
+
+py::object apng_palette(const ApngReader& r) {
+  const std::vector<std::uint8_t> p = r.palette();
+  if (p.empty()) return py::none();
+  auto out = empty<std::uint8_t>({static_cast<py::ssize_t>(p.size() / 3), 3});
+  std::copy(p.begin(), p.end(), out.mutable_data());
+  return std::move(out);
+}
+
 }  // namespace
 }  // namespace bsp::py_bind
 
@@ -77,6 +117,39 @@ BSP_BINDING(media) {
       .def_property_readonly("frames_stored", &ApngWriter::frames_stored,
                              "APNG frames after dropping duplicates.")
       .def_property_readonly("path", &ApngWriter::path, "Final path of the file.");
+
+  py::class_<bsp::VideoReader>(m, "VideoReader", "Threaded video decoder (RGB frames out).")
+      .def(py::init<std::string, int>(), py::arg("path"), py::arg("threads") = 0,
+           py::call_guard<py::gil_scoped_release>(),
+           "Opens the file and counts its shown frames (a packet scan, no decoding).")
+      .def_property_readonly("frame_count", &bsp::VideoReader::frame_count, "Exact frame count.")
+      .def_property_readonly("fps", &bsp::VideoReader::fps, "Average frame rate.")
+      .def_property_readonly("width", &bsp::VideoReader::width, "Picture width.")
+      .def_property_readonly("height", &bsp::VideoReader::height, "Picture height.")
+      .def_property_readonly("codec", &bsp::VideoReader::codec, "Decoder name.")
+      .def("read", &video_read, py::arg("indices"), py::arg("crop") = py::none(),
+           "Frames `indices` as (K, H, W, 3) uint8 RGB; crop = (x, y, width, height) is "
+           "applied before the colour conversion (GIL released).");
+
+  py::class_<bsp::ApngReader>(m, "ApngReader", "APNG/PNG decoder (indices for palette files).")
+      .def(py::init<std::string>(), py::arg("path"), py::call_guard<py::gil_scoped_release>(),
+           "Reads the file and walks its chunks (CRCs, sequence numbers, frame table).")
+      .def_property_readonly("frame_count", &bsp::ApngReader::frame_count, "Frames (acTL).")
+      .def_property_readonly("width", &bsp::ApngReader::width, "Canvas width.")
+      .def_property_readonly("height", &bsp::ApngReader::height, "Canvas height.")
+      .def_property_readonly("channels", &bsp::ApngReader::channels, "Bytes per output pixel.")
+      .def_property_readonly("colour_type", &bsp::ApngReader::colour_type, "PNG colour type.")
+      .def_property_readonly("indexed", &bsp::ApngReader::indexed, "True for palette files.")
+      .def_property_readonly("palette", &apng_palette, "(N, 3) uint8 PLTE, or None.")
+      .def_property_readonly("delays", &bsp::ApngReader::delays, "Seconds each frame shows.")
+      .def_property_readonly("dispose_ops", &bsp::ApngReader::dispose_ops, "fcTL dispose_op.")
+      .def_property_readonly("blend_ops", &bsp::ApngReader::blend_ops, "fcTL blend_op.")
+      .def("read", &apng_read, py::arg("indices"),
+           "Composited frames `indices`: (K, H, W) for indexed/grey, else (K, H, W, C) (GIL "
+           "released).")
+      .def("video_to_apng_frames", &bsp::ApngReader::video_to_apng_frames,
+           py::arg("n_video_frames"), py::arg("fps"),
+           "APNG frame shown at each video frame's time k / fps (-1 after the animation).");
 
   std::vector<std::string> names(bsp::kTagNames.begin(), bsp::kTagNames.end());
   std::vector<std::array<std::uint8_t, 3>> colors(bsp::kCityscapesColors.begin(),
