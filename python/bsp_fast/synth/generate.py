@@ -1,0 +1,206 @@
+"""bsp_fast.synth.generate: a whole CARLA-BSP-format dataset, clip by clip.
+
+Each clip is made by one worker (media written straight into the output tree, its CSV rows
+into a per-clip part file); the parent appends the parts to data.csv in clip order. The
+output is built in ``OUT_DIR.tmp-*`` and renamed when complete, so an interrupted run never
+leaves a half-written dataset under OUT_DIR. The same seed gives byte-identical files
+whatever the number of workers.
+"""
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing
+import os
+import shutil
+import tempfile
+import time
+
+from .config import SynthConfig, load_yaml_config, make_config
+
+PARTS = ".parts"
+
+
+def _clip_job(cfg: SynthConfig, index: int, root: str, threads: int) -> dict:
+    """Makes clip `index` under `root`; returns its statistics (runs in a worker)."""
+    from .. import csvio
+    from . import clip as cl
+    from . import motion as mo
+
+    motion = mo.load(cfg.motion, float(cfg.fps)) if cfg.motion else None
+    cp = cl.plan_clip(cfg, index, motion)
+    per_frame = cl.pose_columns(cp, cfg)
+    visible = cl.render_clip(cp, cfg, per_frame, os.path.join(root, "clips"), threads)
+    cols = cl.csv_columns(cp, cfg, per_frame, visible)
+    csvio.write_csv(os.path.join(root, PARTS, f"{index:06d}.csv"), cols,
+                    threads=1 if threads == 1 else None)
+    annotated = per_frame["annotated"]
+    return {
+        "index": index, "id": cp.id, "profile": cp.profile.name, "crossing": cp.plan.crossing,
+        "speed": cp.speed, "frames": int(len(annotated)), "annotated": int(annotated.sum()),
+        "crossing_frames": int((annotated & per_frame["frame.pedestrian.is_crossing"]).sum()),
+        "segmentation_frames": int((annotated & visible).sum()),
+    }
+
+
+def _append_part(out, part: str, header: bool) -> None:
+    with open(part, "rb") as fh:
+        first = fh.readline()
+        if header:
+            out.write(first)
+        shutil.copyfileobj(fh, out, 1 << 20)
+
+
+def _resolve(preset, clips, frames, size, fov, seed, config, motion,
+             apng_drop_duplicates) -> SynthConfig:
+    overrides = load_yaml_config(config) if config else {}
+    cli = dict(number_of_clips=clips, clip_length_in_frames=frames, camera_image_size=size,
+               camera_fov=fov, seed=seed)
+    overrides.update({k: v for k, v in cli.items() if v is not None})
+    if apng_drop_duplicates:
+        overrides["apng_drop_duplicates"] = True
+    if motion is not None:
+        path = os.path.abspath(os.fspath(motion))
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"motion file not found: {motion}")
+        overrides["motion"] = path
+    cfg = make_config(preset, overrides)
+    if cfg.motion:
+        from dataclasses import replace
+
+        from . import motion as mo
+
+        cfg = replace(cfg, motion_sha256=mo.load(cfg.motion, float(cfg.fps)).sha256)
+    return cfg
+
+
+def _summary(cfg: SynthConfig, stats: list, seconds: float, out_dir: str) -> dict:
+    per_profile: dict = {}
+    for s in stats:
+        p = per_profile.setdefault(s["profile"], {"clips": 0, "annotated_frames": 0,
+                                                  "crossing_clips": 0})
+        p["clips"] += 1
+        p["annotated_frames"] += s["annotated"]
+        p["crossing_clips"] += int(s["crossing"])
+    annotated = sum(s["annotated"] for s in stats)
+    crossing = sum(s["crossing_frames"] for s in stats)
+    frames = sum(s["frames"] for s in stats)
+    return {
+        "out_dir": out_dir, "clips": len(stats), "frames": frames,
+        "annotated_frames": annotated, "annotated_share": annotated / frames if frames else 0.0,
+        "crossing_frames": crossing, "crossing_share": crossing / annotated if annotated else 0.0,
+        "crossing_clips": sum(int(s["crossing"]) for s in stats),
+        "per_profile": dict(sorted(per_profile.items())), "seconds": seconds,
+        "clips_per_second": len(stats) / seconds if seconds > 0 else 0.0,
+        "ids": [s["id"] for s in stats], "seed": cfg.seed, "preset": cfg.preset,
+    }
+
+
+def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
+             frames: int | None = None, size=None, fov: float | None = None,
+             seed: int | None = None, workers: int | None = None, config=None, motion=None,
+             apng_drop_duplicates: bool = False, force: bool = False,
+             progress: bool = True) -> dict:
+    """Generates a CARLA-BSP-format dataset under ``out_dir`` and returns a summary dict.
+
+    preset: ``sample`` (4 clips x 90 frames, 640x240) or ``full`` (396 x 900, 1600x600).
+    clips, frames, size ('WxH' or (W, H)), fov, seed: override the preset and the config.
+    config: a YAML file with the original generator's keys (number_of_clips,
+        clip_length_in_frames, pedestrian_distributions, camera_position_distributions,
+        camera_fov, camera_image_size, batch_size, seed, ...).
+    motion: a BVH / FBX / glTF animation retargeted onto the skeleton instead of the gait.
+    workers: worker processes (default: CPU count, at most one per clip); the output does
+        not depend on it.
+    apng_drop_duplicates: drop identical consecutive segmentation frames (as the original
+        writer did); default keeps one APNG frame per video frame.
+    force: replace an existing ``out_dir``.
+
+    Summary keys: out_dir, clips, frames, annotated_frames, annotated_share,
+    crossing_frames, crossing_share, crossing_clips, per_profile {name: {clips,
+    annotated_frames, crossing_clips}}, seconds, clips_per_second, ids, seed, preset.
+    """
+    from .. import __version__
+
+    t0 = time.perf_counter()
+    out_dir = os.path.abspath(os.fspath(out_dir))
+    if os.path.exists(out_dir) and not force:
+        raise FileExistsError(f"{out_dir} exists; pass force=True (--force) to replace it")
+    cfg = _resolve(preset, clips, frames, size, fov, seed, config, motion,
+                   apng_drop_duplicates)
+    n = cfg.number_of_clips
+    if workers is None:
+        workers = min(os.cpu_count() or 1, n)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: expected a positive integer, got {workers!r}")
+    workers = min(workers, n)
+    parent = os.path.dirname(out_dir)
+    os.makedirs(parent, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix=os.path.basename(out_dir) + ".tmp-", dir=parent)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; a dataset is not
+    try:
+        os.makedirs(os.path.join(tmp, "clips"))
+        os.makedirs(os.path.join(tmp, PARTS))
+        stats = _run_clips(cfg, tmp, workers, progress)
+        _write_config(cfg, tmp, __version__)
+        shutil.rmtree(os.path.join(tmp, PARTS))
+        if os.path.exists(out_dir):
+            shutil.rmtree(out_dir)
+        os.rename(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return _summary(cfg, stats, time.perf_counter() - t0, out_dir)
+
+
+def _write_config(cfg: SynthConfig, root: str, version: str) -> None:
+    import yaml
+
+    with open(os.path.join(root, "config.yaml"), "w", encoding="utf-8") as fh:
+        yaml.safe_dump(cfg.to_yaml_dict(version), fh, sort_keys=False)
+
+
+def _run_clips(cfg: SynthConfig, root: str, workers: int, progress: bool) -> list:
+    """Runs every clip and appends its rows to data.csv in clip order as they complete."""
+    from tqdm.auto import tqdm
+
+    n = cfg.number_of_clips
+    done: dict = {}
+    stats = []
+    bar = tqdm(total=n, desc="clips", unit="clip", disable=not progress)
+    with open(os.path.join(root, "data.csv"), "wb") as out:
+        def flush():
+            while len(stats) in done:
+                i = len(stats)
+                _append_part(out, os.path.join(root, PARTS, f"{i:06d}.csv"), header=i == 0)
+                stats.append(done.pop(i))
+
+        if workers == 1:
+            for i in range(n):
+                done[i] = _clip_job(cfg, i, root, 0)  # one process: threads inside C++
+                flush()
+                bar.update(1)
+        else:
+            ctx = multiprocessing.get_context("spawn")
+            with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+                futures = [pool.submit(_clip_job, cfg, i, root, 1) for i in range(n)]
+                try:
+                    for fut in cf.as_completed(futures):
+                        s = fut.result()
+                        done[s["index"]] = s
+                        flush()
+                        bar.update(1)
+                except BaseException:
+                    for f in futures:
+                        f.cancel()
+                    raise
+    bar.close()
+    return stats
+
+
+def profile_counts(summary: dict) -> dict:
+    """{profile: clips} from a summary (a convenience for reports and tests)."""
+    return {k: v["clips"] for k, v in summary["per_profile"].items()}
+
+
+__all__ = ["generate", "profile_counts"]
