@@ -1,0 +1,120 @@
+"""BSPDataModule: existing files, option checks, Lightning, and conversion on first use."""
+import importlib
+
+import numpy as np
+import pytest
+import torch
+
+from bsp_fast.loaders import BSPDataModule, ClipDataset
+from bsp_fast.loaders.testing import write_clip_file
+
+
+@pytest.fixture(scope="module")
+def h5file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("dm") / "clips.h5"
+    write_clip_file(path, clips=(64, 16, 16), clip_length=6)
+    return path
+
+
+def test_existing_file_setup_and_loaders(h5file):
+    dm = BSPDataModule(h5_path=h5file, task="autoencoder", noise=5.0, mjp=0.2944, batch_size=16,
+                       balance=True)
+    dm.prepare_data()  # the file exists: nothing to convert
+    dm.setup("fit")
+    assert set(dm.datasets) == {"train", "val"} and dm.clip_length == 6
+    assert dm.datasets["train"].augment and not dm.datasets["val"].augment
+    n0, n1 = dm.datasets["train"].class_counts
+    assert n0 == n1 > 0
+    batch = next(iter(dm.train_dataloader()))
+    assert batch["inputs"].shape == (16, 6, 26, 2) and batch["targets"].shape == (16, 6, 26, 2)
+    seen = [i for b in dm.test_dataloader() for i in b["meta"]["index"].tolist()]
+    assert seen == list(range(len(dm.datasets["test"])))  # eval order is sequential
+
+
+def test_option_checks(h5file, tmp_path):
+    with pytest.raises(ValueError, match="task must be one of"):
+        BSPDataModule(h5_path=h5file, task="segmentation")
+    with pytest.raises(ValueError, match="needs dataset_dir"):
+        BSPDataModule()
+    dm = BSPDataModule(h5_path=h5file, clip_length=16)
+    with pytest.raises(ValueError, match="clip_length=6 but the data module asks for 16"):
+        dm.setup()
+    with pytest.raises(FileNotFoundError, match="no dataset_dir"):
+        BSPDataModule(h5_path=tmp_path / "missing.h5").prepare_data()
+
+
+def test_benchmark_constructor_uses_the_report_setup(tmp_path):
+    dm = BSPDataModule.benchmark(tmp_path, batch_size=32)
+    assert (dm.clip_length, dm.clip_offset, dm.benchmark_windows, dm.balance) == (16, 6, True, True)
+    assert dm.h5_path == tmp_path / "bsp_fast-clips-L16-o6-benchmark-balanced.h5"
+    assert BSPDataModule.benchmark(tmp_path, clip_offset=8).clip_offset == 8
+
+
+def test_lightning_fit_runs_and_reshuffles_per_epoch(h5file):
+    pl = pytest.importorskip("lightning.pytorch")
+
+    class Probe(pl.LightningModule):
+        def __init__(self):
+            super().__init__()
+            self.layer = torch.nn.Linear(6 * 26 * 2, 2)
+            self.orders = []
+
+        def on_train_epoch_start(self):
+            self.orders.append([])
+
+        def training_step(self, batch, _):
+            self.orders[-1] += batch["meta"]["index"].tolist()
+            logits = self.layer(batch["inputs"].flatten(1))
+            return torch.nn.functional.cross_entropy(logits, batch["targets"])
+
+        def configure_optimizers(self):
+            return torch.optim.SGD(self.parameters(), lr=0.01)
+
+    dm = BSPDataModule(h5_path=h5file, task="classification", batch_size=16, sampler_seed=1)
+    probe = Probe()
+    trainer = pl.Trainer(max_epochs=2, logger=False, enable_checkpointing=False,
+                         enable_progress_bar=False, enable_model_summary=False,
+                         num_sanity_val_steps=0, limit_val_batches=0)
+    trainer.fit(probe, datamodule=dm)
+    n = len(dm.datasets["train"])
+    assert [sorted(o) for o in probe.orders] == [list(range(n))] * 2
+    sampler = dm.train_dataloader().batch_sampler
+    assert probe.orders == [sampler.order(0).tolist(), sampler.order(1).tolist()]
+
+
+def _synth_pipeline():
+    """bsp-synth and the converter binding, or a skip naming what is missing."""
+    try:
+        synth = importlib.import_module("bsp_fast.synth")
+    except ImportError as exc:
+        pytest.skip(f"bsp_fast.synth not importable: {exc}")
+    if not hasattr(synth, "generate"):
+        pytest.skip("bsp_fast.synth.generate not available yet")
+    from bsp_fast._native import core
+
+    if not hasattr(core, "convert_csv"):
+        pytest.skip("the converter binding (convert_csv) is not built")
+    return synth
+
+
+def test_datamodule_converts_a_synth_sample_on_first_use(tmp_path):
+    synth = _synth_pipeline()
+    data = tmp_path / "sample"
+    synth.generate(data, preset="sample", progress=False)
+    dm = BSPDataModule(data, task="lifting", clip_length=8, batch_size=8)
+    assert not dm.h5_path.exists()
+    dm.prepare_data()
+    assert dm.h5_path.is_file() and dm.conversion_report is not None
+    dm.setup()
+    for split in ("train", "val", "test"):
+        ds = dm.datasets[split]
+        assert isinstance(ds, ClipDataset) and ds.clip_length == 8
+    batch = next(iter(dm.val_dataloader()))
+    t = batch["targets"].numpy()
+    np.testing.assert_allclose(t[:, :, 1], 0, atol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(t[:, :, 8], axis=-1), 1, rtol=1e-4)
+    mtime = dm.h5_path.stat().st_mtime_ns
+    again = BSPDataModule(data, task="classification", clip_length=8)
+    again.setup()  # second use: the cached file is reused, not reconverted
+    assert again.h5_path == dm.h5_path and dm.h5_path.stat().st_mtime_ns == mtime
+    assert again.conversion_report is None
