@@ -2,8 +2,13 @@
 // frame; reads then decode forward from the nearest keyframe and identify each decoded
 // frame by its timestamp, converting only the frames asked for.
 #include <algorithm>
+#include <condition_variable>
+#include <deque>
+#include <exception>
 #include <mutex>
 #include <numeric>
+#include <optional>
+#include <thread>
 
 #include "bsp/errors.hpp"
 #include "bsp/ffmpeg.hpp"
@@ -45,7 +50,8 @@ struct VideoReader::Impl {
   bool next_frame(std::int64_t target);
   std::int64_t index_of(std::int64_t ts) const;
   void goto_frame(std::int64_t k);
-  void convert(std::uint8_t* out, const Crop& c);
+  void convert(const AVFrame& f, std::uint8_t* out, const Crop& c);
+  class Converter;
 };
 
 void VideoReader::Impl::open(int threads) {
@@ -218,26 +224,26 @@ void plane_offsets(const AVFrame& f, const AVPixFmtDescriptor& d, int x, int y,
 // Converts the crop of `frame` to RGB24 at `out` (rows c.width * 3 bytes). Only the
 // cropped pixels are converted, widened to 8-pixel column blocks and whole chroma rows;
 // the extra pixels are dropped after conversion.
-void VideoReader::Impl::convert(std::uint8_t* out, const Crop& c) {
-  const auto pix = static_cast<AVPixelFormat>(frame->format);
+void VideoReader::Impl::convert(const AVFrame& f, std::uint8_t* out, const Crop& c) {
+  const auto pix = static_cast<AVPixelFormat>(f.format);
   const AVPixFmtDescriptor* d = av_pix_fmt_desc_get(pix);
-  if (!d) fail("unknown pixel format " + std::to_string(frame->format));
+  if (!d) fail("unknown pixel format " + std::to_string(f.format));
   // Columns go in blocks of 8 from a multiple of 8, as in a full-width conversion, so a
   // crop gets exactly the pixels of the full picture (swscale's SIMD and C paths round
   // differently); rows start on a chroma row.
   const int ax = c.x & ~7, ay = c.y & ~((1 << d->log2_chroma_h) - 1);
-  const int w = std::min((c.x + c.width - ax + 7) & ~7, frame->width - ax);
+  const int w = std::min((c.x + c.width - ax + 7) & ~7, f.width - ax);
   // Rows too: the 4:2:0 converters write rows in pairs.
-  const int h = std::min((c.y + c.height - ay + 1) & ~1, frame->height - ay);
+  const int h = std::min((c.y + c.height - ay + 1) & ~1, f.height - ay);
   sws.reset(sws_getCachedContext(sws.release(), w, h, pix, w, h, AV_PIX_FMT_RGB24, SWS_BILINEAR,
                                  nullptr, nullptr, nullptr));
   if (!sws) fail(std::string("cannot convert ") + d->name + " to RGB");
-  const bool full_range = frame->color_range == AVCOL_RANGE_JPEG;
-  const int* coeffs = sws_getCoefficients(sws_colorspace(frame->colorspace));
+  const bool full_range = f.color_range == AVCOL_RANGE_JPEG;
+  const int* coeffs = sws_getCoefficients(sws_colorspace(f.colorspace));
   sws_setColorspaceDetails(sws.get(), coeffs, full_range, sws_getCoefficients(SWS_CS_DEFAULT), 1,
                            0, 1 << 16, 1 << 16);
   const std::uint8_t* src[4];
-  plane_offsets(*frame, *d, ax, ay, src);
+  plane_offsets(f, *d, ax, ay, src);
   // swscale's converters write whole blocks of 8 pixels and pairs of rows, past the end of
   // a crop of another size: such crops go through a padded scratch buffer.
   const bool direct =
@@ -246,13 +252,82 @@ void VideoReader::Impl::convert(std::uint8_t* out, const Crop& c) {
   if (!direct) scratch.resize(static_cast<std::size_t>(stride) * (h + 2));
   std::uint8_t* dst[4] = {direct ? out : scratch.data(), nullptr, nullptr, nullptr};
   const int dst_stride[4] = {stride, 0, 0, 0};
-  sws_scale(sws.get(), src, frame->linesize, 0, h, dst, dst_stride);
+  sws_scale(sws.get(), src, f.linesize, 0, h, dst, dst_stride);
   if (direct) return;
   const std::size_t dx = static_cast<std::size_t>(c.x - ax), dy = static_cast<std::size_t>(c.y - ay);
   const std::size_t row = static_cast<std::size_t>(c.width) * 3;
   for (int r = 0; r < c.height; ++r)
     std::copy_n(scratch.data() + (dy + r) * stride + dx * 3, row, out + r * row);
 }
+
+// Converts decoded frames on a second thread while the caller's thread keeps the decoder
+// fed: with frame threading the decoder's workers then stay busy during conversions, and
+// on two cores decoding plus conversion approach the decode-only speed.
+class VideoReader::Impl::Converter {
+ public:
+  Converter(Impl& m, const Crop& c) : m_(m), crop_(c), thread_([this] { run(); }) {}
+  ~Converter() { stop(); }
+  // Queues a new reference to `f` (no copy of the pixels) for conversion into `dst`.
+  void push(const AVFrame& f, std::uint8_t* dst) {
+    av::Frame ref = av::alloc_frame<VideoDecodeError>(m_.path);
+    BSP_AV_CHECK(VideoDecodeError, av_frame_ref(ref.get(), &f), m_.path, "reference a frame");
+    std::unique_lock<std::mutex> lock(mu_);
+    cv_.wait(lock, [&] { return jobs_.size() < kDepth || error_; });
+    if (error_) std::rethrow_exception(error_);
+    jobs_.push_back({std::move(ref), dst});
+    cv_.notify_all();
+  }
+  // Waits for every queued conversion; rethrows the converter's error.
+  void finish() {
+    stop();
+    if (error_) std::rethrow_exception(error_);
+  }
+
+ private:
+  static constexpr std::size_t kDepth = 3;
+  struct Job {
+    av::Frame frame;
+    std::uint8_t* dst;
+  };
+  void stop() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      done_ = true;
+      cv_.notify_all();
+    }
+    if (thread_.joinable()) thread_.join();
+  }
+  void run() {
+    for (;;) {
+      Job job;
+      bool failed;
+      {
+        std::unique_lock<std::mutex> lock(mu_);
+        cv_.wait(lock, [&] { return !jobs_.empty() || done_; });
+        if (jobs_.empty()) return;
+        job = std::move(jobs_.front());
+        jobs_.pop_front();
+        failed = error_ != nullptr;
+        cv_.notify_all();
+      }
+      try {
+        if (!failed) m_.convert(*job.frame, job.dst, crop_);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(mu_);
+        error_ = std::current_exception();
+        cv_.notify_all();
+      }
+    }
+  }
+  Impl& m_;
+  Crop crop_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::deque<Job> jobs_;
+  bool done_ = false;
+  std::exception_ptr error_;
+  std::thread thread_;  // last: starts after the members it uses exist
+};
 
 VideoReader::VideoReader(std::string path, int threads) : impl_(std::make_unique<Impl>()) {
   impl_->path = std::move(path);
@@ -299,20 +374,25 @@ void VideoReader::read(const std::vector<std::int64_t>& indices, std::uint8_t* o
                    [&](std::size_t a, std::size_t b) { return indices[a] < indices[b]; });
   const std::size_t frame_bytes = static_cast<std::size_t>(c.width) * c.height * 3;
   std::lock_guard<std::mutex> lock(m.mutex);
-  for (std::size_t i = 0; i < order.size(); ++i) {
-    std::uint8_t* dst = out + order[i] * frame_bytes;
-    if (i > 0 && indices[order[i]] == indices[order[i - 1]]) {  // repeated index
-      std::copy_n(out + order[i - 1] * frame_bytes, frame_bytes, dst);
-      continue;
-    }
-    try {
+  try {
+    std::optional<Impl::Converter> pipeline;
+    if (order.size() > 1) pipeline.emplace(m, c);
+    for (std::size_t i = 0; i < order.size(); ++i) {
+      if (i > 0 && indices[order[i]] == indices[order[i - 1]]) continue;  // copied below
       m.goto_frame(indices[order[i]]);
-      m.convert(dst, c);
-    } catch (...) {
-      m.lost = true;
-      throw;
+      if (pipeline)
+        pipeline->push(*m.frame, out + order[i] * frame_bytes);
+      else
+        m.convert(*m.frame, out + order[i] * frame_bytes, c);
     }
+    if (pipeline) pipeline->finish();
+  } catch (...) {
+    m.lost = true;
+    throw;
   }
+  for (std::size_t i = 1; i < order.size(); ++i)
+    if (indices[order[i]] == indices[order[i - 1]])
+      std::copy_n(out + order[i - 1] * frame_bytes, frame_bytes, out + order[i] * frame_bytes);
 }
 
 }  // namespace bsp
