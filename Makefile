@@ -25,10 +25,13 @@ test-python:
 	$(PY) -m pytest -q tests/python
 
 demo: install
-	@$(PY) tools/demo.py
+	$(PY) -m bsp_fast.synth.cli demo-out/dataset --preset sample --force
+	$(PY) -m bsp_fast.conversion demo-out/dataset demo-out/clips.h5 --verify --force
+	$(PY) tools/h5_summary.py demo-out/clips.h5
 
 bench: install
 	$(PY) benchmarks/bench_kinematics.py
+	$(PY) benchmarks/bench_convert.py
 
 clean:
 	rm -rf build dist *.egg-info demo-out

@@ -23,6 +23,7 @@ from .geometry import (  # noqa: E402
 )
 from . import skeleton  # noqa: E402
 from .csvio import read_csv, write_csv  # noqa: E402
+from .conversion import convert  # noqa: E402
 
 Error = _core.Error
 CsvParseError = _core.CsvParseError
@@ -51,5 +52,5 @@ __all__ = [
     "compose", "forward_kinematics", "in_frame", "invert", "mesh_offset", "project",
     "rotation_matrix", "rotation_to_euler", "to_world", "transform_points", "skeleton",
     "diagnostics", "Error", "CsvParseError", "VideoDecodeError", "VideoEncodeError",
-    "ApngError", "Hdf5Error", "MotionError", "set_num_threads", "num_threads",
+    "ApngError", "Hdf5Error", "MotionError", "set_num_threads", "num_threads", "convert",
 ]

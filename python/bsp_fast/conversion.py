@@ -22,7 +22,7 @@ from pathlib import Path
 
 from ._native import core as _core
 
-__all__ = ["convert", "main", "DEFAULTS"]
+__all__ = ["convert", "main", "format_report", "DEFAULTS"]
 
 DEFAULTS = dict(clip_length=30, benchmark_clip_length=16, benchmark_clip_offset=6,
                 val_frac=0.2, test_frac=0.2, seed=22742, fov=90.0)

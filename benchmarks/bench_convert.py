@@ -1,0 +1,112 @@
+"""bsp-convert end to end, and its CSV stage against what users would otherwise run.
+
+Same run, same generated file (random float32 poses, ~10 KB per row like the real data):
+
+1. CSV stage on the first --csv-rows rows: pandas.read_csv + ast.literal_eval (the original
+   tooling; timed on a subset, it is slow), a pyarrow.csv + pyarrow.compute pipeline (the
+   fastest pure-Python route we found), and bsp_fast.read_csv with 1 and 2 threads.
+2. The whole conversion of the full file (--rows, default 225,000 like the published
+   dataset) with `bsp-convert` in a child process: wall time and peak resident memory,
+   uncompressed and with --compress (file size, write time).
+
+    python benchmarks/bench_convert.py [--rows 225000] [--csv-rows 20000]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_csv  # noqa: E402  (the shared row generator and the Python alternatives)
+
+import bsp_fast as bf  # noqa: E402
+
+
+def write_dataset(root: Path, rows: int, seed: int = 0) -> Path:
+    root.mkdir(parents=True, exist_ok=True)
+    cols = bench_csv.make_columns(rows, seed=seed)
+    # Like the published data: long contiguous runs of annotated frames per recording
+    # (~570 of 900), joints inside the image except for a few frames.
+    ids = cols["id"]
+    start = np.r_[True, ids[1:] != ids[:-1]]
+    first = np.maximum.accumulate(np.where(start, np.arange(rows), 0))
+    cols["frame.idx"] = (np.arange(rows) - first).astype(np.int64)
+    uv = cols["frame.pedestrian.pose.camera"]
+    uv[:] = np.clip(np.nan_to_num(uv, nan=100.0), 1.0, 599.0)
+    uv[np.random.default_rng(seed).random(rows) < 0.002, 0] = np.nan
+    bf.write_csv(root / "data.csv", cols)
+    return root
+
+
+def timed(fn):
+    t0 = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - t0, out
+
+
+def csv_stage(path: Path, nrows: int, pandas_rows: int) -> list:
+    size = os.path.getsize(path)
+    mb_per_row = size / 1e6 / nrows
+    res = []
+    t, _ = timed(lambda: bench_csv.pandas_literal_eval(str(path), pandas_rows))
+    res.append(("pandas + ast.literal_eval (original)", pandas_rows / t, pandas_rows * mb_per_row / t))
+    t, _ = timed(lambda: bench_csv.arrow_pipeline(str(path)))
+    res.append(("pyarrow.csv + pyarrow.compute split/cast", nrows / t, size / 1e6 / t))
+    for th in (1, 2):
+        t, _ = timed(lambda: bf.read_csv(path, columns=list(bench_csv.POSE_COLUMNS), threads=th))
+        res.append((f"bsp_fast.read_csv, {th} thread{'s' if th > 1 else ''}", nrows / t, size / 1e6 / t))
+    return res
+
+
+def run_convert(dataset: Path, out: Path, *extra) -> tuple:
+    # The child reports its own peak RSS (KiB) on its last stderr line.
+    code = ("import sys, resource; from bsp_fast.conversion import main; rc = main(sys.argv[1:]); "
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); sys.exit(rc)")
+    cmd = [sys.executable, "-c", code, str(dataset), str(out), "--force", "--quiet", *extra]
+    t0 = time.perf_counter()
+    p = subprocess.run(cmd, check=True, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    peak_kib = int(p.stderr.strip().splitlines()[-1])
+    return wall, peak_kib / 1024, os.path.getsize(out) / 1e6
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--rows", type=int, default=225_000)
+    ap.add_argument("--csv-rows", type=int, default=20_000)
+    ap.add_argument("--pandas-rows", type=int, default=2_000)
+    ap.add_argument("--dir", default=None, help="work directory (default: a temporary one)")
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
+        tmp = Path(tmp)
+        small = write_dataset(tmp / "small", args.csv_rows)
+        stage = csv_stage(small / "data.csv", args.csv_rows, args.pandas_rows)
+        base = stage[0][1]
+        best_py = stage[1][1]
+        print(f"CSV stage, pose columns, {args.csv_rows:,} rows "
+              f"({os.path.getsize(small / 'data.csv') / 1e6:.0f} MB):\n")
+        print("| reader | rows/s | MB/s | vs pandas | vs pyarrow |")
+        print("|---|---:|---:|---:|---:|")
+        for name, rps, mbs in stage:
+            print(f"| {name} | {rps:,.0f} | {mbs:,.0f} | {rps / base:,.0f}× | {rps / best_py:.1f}× |")
+        t, _ = timed(lambda: write_dataset(tmp / "full", args.rows, seed=1))
+        size = os.path.getsize(tmp / "full" / "data.csv") / 1e9
+        print(f"\nWhole conversion of {args.rows:,} rows ({size:.2f} GB data.csv, generated in {t:.0f} s), "
+              f"defaults (L = 30), 2 threads:\n")
+        print("| output | wall s | peak RSS MB | file MB |")
+        print("|---|---:|---:|---:|")
+        for label, extra in (("uncompressed (default)", ()), ("--compress (shuffle+deflate 1)", ("--compress",))):
+            wall, peak, mb = run_convert(tmp / "full", tmp / "out.h5", *extra)
+            print(f"| {label} | {wall:.1f} | {peak:,.0f} | {mb:,.0f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

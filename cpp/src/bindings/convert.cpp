@@ -1,0 +1,74 @@
+// bsp-convert binding: the whole conversion, GIL released, progress polled from Python.
+#include "bsp/convert.hpp"
+#include "common.hpp"
+#include "options.hpp"
+
+namespace bsp::py_bind {
+namespace {
+
+py::dict report_dict(const ConvertReport& r) {
+  py::dict d;
+  d["rows"] = r.rows, d["recordings"] = r.recordings;
+  py::dict splits;
+  for (int s = 0; s < 3; ++s) {
+    py::dict x;
+    x["clips"] = r.clips[s], x["recordings"] = r.recordings_per_split[s];
+    x["not-crossing"] = r.class_counts[s][0], x["crossing"] = r.class_counts[s][1];
+    splits[kSplitNames[s]] = x;
+  }
+  d["splits"] = splits;
+  d["skipped"] = r.skipped;
+  d["clips_rejected_out_of_image"] = r.clips_rejected_out_of_image;
+  d["clips_dropped_by_balance"] = r.clips_dropped_by_balance;
+  d["seconds"] = r.seconds;
+  d["source_crc32"] = r.source_crc32, d["source_bytes"] = r.source_bytes;
+  py::list v;
+  for (const VerifyRow& row : r.verify)
+    v.append(py::dict(py::arg("recording") = row.recording, py::arg("component_mm") = row.component_mm,
+                      py::arg("world_mm") = row.world_mm, py::arg("camera_px") = row.camera_px));
+  d["verify"] = v;
+  d["verify_failed"] = r.verify_failed;
+  return d;
+}
+
+py::dict convert(const std::string& csv, const std::string& out, ConvertProgress* progress,
+                 py::kwargs kw) {
+  py::dict d(kw);
+  ConvertOptions o;
+  o.clips = clip_options(d);
+  o.fov = take(d, "fov", o.fov);
+  o.threads = take(d, "threads", o.threads);
+  o.verify = take(d, "verify", o.verify);
+  o.verify_tol_mm = take(d, "verify_tol_mm", o.verify_tol_mm);
+  o.verify_world_tol_mm = take(d, "verify_world_tol_mm", o.verify_world_tol_mm);
+  o.verify_tol_px = take(d, "verify_tol_px", o.verify_tol_px);
+  o.compress = take(d, "compress", o.compress);
+  o.compression_level = take(d, "compression_level", o.compression_level);
+  o.chunk_clips = take(d, "chunk_clips", o.chunk_clips);
+  o.source_path = take(d, "source_path", o.source_path);
+  o.extra_attrs = take(d, "extra_attrs", o.extra_attrs);
+  no_leftovers(d);
+  ConvertReport r;
+  {
+    py::gil_scoped_release nogil;
+    r = convert_csv(csv, out, o, progress);
+  }
+  return report_dict(r);
+}
+
+}  // namespace
+}  // namespace bsp::py_bind
+
+BSP_BINDING(convert) {
+  using namespace bsp::py_bind;
+  namespace py = pybind11;
+  py::class_<bsp::ConvertProgress>(m, "ConvertProgress",
+                                   "Counters a running conversion updates; poll from Python.")
+      .def(py::init<>())
+      .def_property_readonly("stage", [](const bsp::ConvertProgress& p) { return p.stage.load(); })
+      .def_property_readonly("done", [](const bsp::ConvertProgress& p) { return p.done.load(); })
+      .def_property_readonly("total", [](const bsp::ConvertProgress& p) { return p.total.load(); });
+  m.def("convert_csv", &convert, py::arg("csv_path"), py::arg("out_path"),
+        py::arg("progress") = nullptr,
+        "Converts data.csv into an HDF5 file of train/val/test clips; returns the report.");
+}

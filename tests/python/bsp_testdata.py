@@ -1,0 +1,90 @@
+"""Small, consistent CARLA-BSP data.csv files written independently of the core's writer.
+
+Poses follow the dataset's relations (SPEC section 3): component = M ∘ FK(relative),
+world = walker ∘ component, pose.camera = projection of world. Cells are formatted the way
+pandas wrote the original (Python str() of float lists).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+import bsp_fast as bf
+from bsp_fast import skeleton as sk
+
+COLUMNS = [
+    "id", "world.map", "camera.idx", "camera.transform", "camera.width", "camera.height",
+    "pedestrian.idx", "pedestrian.model", "pedestrian.age", "pedestrian.gender",
+    "pedestrian.spawn_point", "frame.idx", "camera.recording", "camera.semantic_segmentation",
+    "world.frame", "frame.pedestrian.transform", "frame.pedestrian.velocity",
+    "frame.pedestrian.pose.world", "frame.pedestrian.pose.component",
+    "frame.pedestrian.pose.relative", "frame.pedestrian.is_crossing",
+    "frame.pedestrian.pose.camera", "frame.pedestrian.pose.in_frame",
+    "frame.pedestrian.pose.in_segmentation",
+]
+W, H = 1600, 600
+
+
+def f32list(a) -> str:
+    a = np.asarray(a, np.float32)
+    if a.ndim == 1:
+        return "[" + ", ".join(repr(float(x)) for x in a) + "]"
+    return "[" + ", ".join(f32list(x) for x in a) + "]"
+
+
+def recording(uuid: str, frames, crossing_from=None, seed=0, age="adult", gender="female",
+              camera_distance=8.0):
+    """Rows (dicts of column -> value) of one recording walking across the camera's view."""
+    rng = np.random.default_rng(seed)
+    frames = np.asarray(frames)
+    n = len(frames)
+    rel = np.broadcast_to(sk.reference_pose((age, gender)), (n, 26, 6)).copy()
+    rel[:, 1:, 3:] += rng.normal(0, 3, (n, 25, 3))
+    M = np.array([0, 0, -0.92, 0, -90, 0])
+    comp = bf.forward_kinematics(rel, root=M)
+    walker = np.zeros((n, 6))
+    walker[:, 0] = 100 + camera_distance
+    walker[:, 1] = 50 - 1.5 + 0.03 * frames
+    walker[:, 2] = 0.92
+    walker[:, 4] = 90.0
+    world = bf.to_world(comp, walker)
+    cam = np.array([100.0, 50.0, 1.2, 0.0, 0.0, 0.0])  # looking along +x at the walker
+    uv = bf.project(world[..., :3], cam, W, H)
+    rows = []
+    for i, f in enumerate(frames):
+        rows.append({
+            "id": uuid, "world.map": "/Game/Carla/Maps/Town04", "camera.idx": 0,
+            "camera.transform": f32list(cam), "camera.width": W, "camera.height": H,
+            "pedestrian.idx": 0, "pedestrian.model": "walker.pedestrian.0001",
+            "pedestrian.age": age, "pedestrian.gender": gender,
+            "pedestrian.spawn_point": f32list([100 + camera_distance, 48.5, 0.92, 0, 0, 0]),
+            "frame.idx": int(f), "camera.recording": f"clips/{uuid}-0.mp4",
+            "camera.semantic_segmentation": f"clips/{uuid}-1.apng", "world.frame": 1000 + int(f),
+            "frame.pedestrian.transform": f32list(walker[i]),
+            "frame.pedestrian.velocity": f32list([0, 0.9, 0]),
+            "frame.pedestrian.pose.world": f32list(world[i]),
+            "frame.pedestrian.pose.component": f32list(comp[i]),
+            "frame.pedestrian.pose.relative": f32list(rel[i]),
+            "frame.pedestrian.is_crossing": bool(crossing_from is not None and f >= crossing_from),
+            "frame.pedestrian.pose.camera": f32list(uv[i]).replace("nan", "nan"),
+            "frame.pedestrian.pose.in_frame": True, "frame.pedestrian.pose.in_segmentation": True,
+        })
+    return rows
+
+
+def csv_text(rows, columns=None, newline="\n", crossing_name="frame.pedestrian.is_crossing"):
+    columns = list(columns or COLUMNS)
+    out = [",".join(crossing_name if c == "frame.pedestrian.is_crossing" else c for c in columns)]
+    for r in rows:
+        cells = []
+        for c in columns:
+            v = r[c]
+            s = "" if v is None else (str(v) if not isinstance(v, str) else v)
+            cells.append(f'"{s}"' if "," in s or '"' in s else s)
+        out.append(",".join(cells))
+    return newline.join(out) + newline
+
+
+def write_dataset(root, rows, **kw):
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "data.csv").write_bytes(csv_text(rows, **kw).encode())
+    return root
