@@ -25,8 +25,8 @@ test-python:
 	$(PY) -m pytest -q tests/python
 
 demo: install
-	$(PY) -m bsp_fast.synth.cli demo-out/dataset --preset sample --force
-	$(PY) -m bsp_fast.conversion demo-out/dataset demo-out/clips.h5 --verify --force
+	$(PY) -m bsp_fast synth demo-out/dataset --preset sample --force
+	$(PY) -m bsp_fast convert demo-out/dataset demo-out/clips.h5 --verify --force
 	$(PY) tools/h5_summary.py demo-out/clips.h5
 
 bench: install

@@ -1,23 +1,36 @@
-"""`python -m bsp_fast [--version]`: print the package and linked library versions."""
+"""``python -m bsp_fast``: versions, or a subcommand (the console scripts without PATH).
+
+    python -m bsp_fast --version        package and linked library versions
+    python -m bsp_fast convert ...      same as bsp-convert
+    python -m bsp_fast synth ...        same as bsp-synth
+"""
 from __future__ import annotations
 
-import argparse
 import sys
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m bsp_fast",
-        description="bsp_fast diagnostics: package version and linked library versions.")
-    parser.add_argument("--version", action="store_true",
-                        help="print the bsp_fast version and the versions of FFmpeg, OpenCV, "
-                             "HDF5, Eigen, assimp and libdeflate it is linked with")
-    parser.parse_args(argv)
+def _versions() -> int:
     import bsp_fast
 
     for key, value in bsp_fast.diagnostics().items():
         print(f"{key:12s} {value}")
     return 0
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "convert":
+        from bsp_fast.conversion import main as convert_main
+
+        return convert_main(argv[1:])
+    if argv and argv[0] == "synth":
+        from bsp_fast.synth.cli import main as synth_main
+
+        return synth_main(argv[1:])
+    if not argv or argv[0] in ("--version", "-V", "version"):
+        return _versions()
+    print(__doc__.strip(), file=sys.stderr if argv[0] not in ("-h", "--help") else sys.stdout)
+    return 0 if argv[0] in ("-h", "--help") else 2
 
 
 if __name__ == "__main__":

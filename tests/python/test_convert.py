@@ -228,7 +228,7 @@ def test_bad_options_are_value_errors(ds, tmp_path):
 
 def test_cli_runs_as_a_module(ds, tmp_path):
     out = tmp_path / "o.h5"
-    p = subprocess.run([sys.executable, "-m", "bsp_fast.conversion", str(ds), str(out), "--clip-length", "10"],
+    p = subprocess.run([sys.executable, "-m", "bsp_fast", "convert", str(ds), str(out), "--clip-length", "10"],
                        capture_output=True, text=True, env={**os.environ})
     assert p.returncode == 0, p.stderr
     assert "train" in p.stdout and "rows/s" in p.stdout
