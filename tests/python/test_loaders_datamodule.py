@@ -97,24 +97,45 @@ def _synth_pipeline():
     return synth
 
 
-def test_datamodule_converts_a_synth_sample_on_first_use(tmp_path):
+@pytest.fixture(scope="module")
+def synth_sample(tmp_path_factory):
     synth = _synth_pipeline()
-    data = tmp_path / "sample"
+    data = tmp_path_factory.mktemp("synth") / "sample"
     synth.generate(data, preset="sample", progress=False)
-    dm = BSPDataModule(data, task="lifting", clip_length=8, batch_size=8)
+    return data
+
+
+def test_datamodule_converts_a_synth_sample_on_first_use(synth_sample):
+    dm = BSPDataModule(synth_sample, task="lifting", clip_length=8, batch_size=8)
     assert not dm.h5_path.exists()
     dm.prepare_data()
     assert dm.h5_path.is_file() and dm.conversion_report is not None
     dm.setup()
     for split in ("train", "val", "test"):
         ds = dm.datasets[split]
-        assert isinstance(ds, ClipDataset) and ds.clip_length == 8
+        assert isinstance(ds, ClipDataset) and ds.clip_length == 8 and len(ds) > 0
     batch = next(iter(dm.val_dataloader()))
     t = batch["targets"].numpy()
     np.testing.assert_allclose(t[:, :, 1], 0, atol=1e-6)
     np.testing.assert_allclose(np.linalg.norm(t[:, :, 8], axis=-1), 1, rtol=1e-4)
     mtime = dm.h5_path.stat().st_mtime_ns
-    again = BSPDataModule(data, task="classification", clip_length=8)
+    again = BSPDataModule(synth_sample, task="classification", clip_length=8)
     again.setup()  # second use: the cached file is reused, not reconverted
     assert again.h5_path == dm.h5_path and dm.h5_path.stat().st_mtime_ns == mtime
     assert again.conversion_report is None
+
+
+def test_two_workers_over_a_converted_synth_sample_yield_each_clip_once(synth_sample, tmp_path):
+    h5 = tmp_path / "clips.h5"
+    dm = BSPDataModule(synth_sample, h5, task="autoencoder", clip_length=10, clip_offset=5,
+                       noise=5.0, mjp=0.2944, batch_size=5, num_workers=2)
+    dm.setup("fit")
+    n = len(dm.datasets["train"])
+    loader = dm.train_dataloader()
+    for _ in range(2):
+        seen = []
+        for b in loader:
+            seen += b["meta"]["index"].tolist()
+            assert b["inputs"].shape[1:] == (10, 26, 2)
+            assert torch.isfinite(b["inputs"]).all() and torch.isfinite(b["targets"]).all()
+        assert sorted(seen) == list(range(n))

@@ -156,6 +156,8 @@ def test_deform_is_noise_then_missing_and_seeded():
     assert 0.1 < gone.mean() < 0.5
     assert np.all(np.abs(a[~gone] - p[~gone]) < 40)  # 8 sigma
     np.testing.assert_array_equal(p, random_poses((10, 5)))  # input untouched
+    c = Compose([GaussianNoise(5.0), MissingJoints(0.3)])(p, rng=np.random.default_rng(4))
+    np.testing.assert_array_equal(a, c)  # the fused pass equals the composition
 
 
 def test_flip_hand_values_and_flipping_twice_is_identity():
