@@ -271,23 +271,36 @@ def test_truncated_apng(tmp_path, seg_file):
         media.ApngReader(cut)
 
 
-def test_corrupt_zlib_data(tmp_path, seg_file):
-    """Damage that keeps the CRC valid is caught by the zlib stream's own checks."""
-    data = bytearray(seg_file.read_bytes())
-    pos = 8
-    for name, body in chunks(seg_file):
-        if name == "IDAT":
+def corrupt_zlib(path, out, frame: int):
+    """Flips bits inside frame `frame`'s zlib data and fixes the chunk CRC, so only the
+    zlib stream's own checks can notice."""
+    data = bytearray(path.read_bytes())
+    pos, current = 8, -1
+    for name, body in chunks(path):
+        if name == "fcTL":
+            current += 1
+        if name in ("IDAT", "fdAT") and current == frame:
             new = bytearray(body)
             new[len(new) // 2] ^= 0xFF
-            crc = zlib.crc32(b"IDAT" + bytes(new))
+            crc = zlib.crc32(name.encode() + bytes(new))
             data[pos + 8:pos + 8 + len(body)] = new
             data[pos + 8 + len(body):pos + 12 + len(body)] = struct.pack(">I", crc)
             break
         pos += 12 + len(body)
+    out.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("frame", [0, 20])
+def test_corrupt_zlib_data(tmp_path, seg_file, frame):
     bad = tmp_path / "zlib.apng"
-    bad.write_bytes(bytes(data))
-    with pytest.raises(bsp_fast.ApngError, match=r"zlib.apng: frame 0: .*(zlib|short|long)"):
-        media.ApngReader(bad).read([0])
+    corrupt_zlib(seg_file, bad, frame)
+    r = media.ApngReader(bad)
+    pattern = rf"zlib.apng: frame {frame}: .*(zlib|short|long)"
+    with pytest.raises(bsp_fast.ApngError, match=pattern):
+        r.read(np.arange(40))  # decoded ahead on a second thread
+    with pytest.raises(bsp_fast.ApngError, match=pattern):
+        r.read([frame])
+    np.testing.assert_array_equal(r.read(np.arange(frame)), tag_frames(40)[:frame])
 
 
 def test_unsupported_files(tmp_path):

@@ -1,9 +1,13 @@
 // PNG building blocks shared by the APNG writer and reader: big-endian integers, chunk CRCs,
 // the five row filters and RAII for libdeflate (the only compression library we use).
 #pragma once
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <string>
+#include <utility>
+#include <vector>
 
 struct libdeflate_compressor;
 struct libdeflate_decompressor;
@@ -32,6 +36,40 @@ inline void put_u16(std::uint8_t* p, std::uint16_t v) {
 
 // CRC-32 of a chunk: over its 4-byte type followed by its data (not the length).
 std::uint32_t chunk_crc(const std::uint8_t* type, const std::uint8_t* data, std::size_t size);
+
+// fcTL dispose_op and blend_op values.
+enum : std::uint8_t { kDisposeNone = 0, kDisposeBackground = 1, kDisposePrevious = 2 };
+enum : std::uint8_t { kBlendSource = 0, kBlendOver = 1 };
+
+// One APNG frame (fcTL), or the single image of a plain PNG.
+struct FrameInfo {
+  std::uint32_t x = 0, y = 0, w = 0, h = 0;
+  std::uint16_t delay_num = 0, delay_den = 100;  // a den of 0 is stored as 100 (APNG spec)
+  std::uint8_t dispose = kDisposeNone, blend = kBlendSource;
+  std::vector<std::pair<std::size_t, std::size_t>> data;  // zlib pieces: (offset, size)
+};
+
+// What the chunk walk learns about a file.
+struct FileIndex {
+  std::uint32_t width = 0, height = 0;
+  int colour_type = 0;
+  std::size_t channels = 1;            // bytes per pixel (8-bit samples)
+  std::vector<std::uint8_t> palette;   // PLTE, RGB triplets
+  std::uint8_t palette_alpha[256];     // tRNS for palette files (255 = opaque)
+  std::uint8_t key[4] = {0};           // tRNS colour key of grey/RGB files
+  bool has_key = false, has_trns = false;
+  std::vector<FrameInfo> frames;
+  std::int64_t declared = -1;   // acTL num_frames (1 for a plain PNG)
+  std::int64_t bad_frame = -1;  // first frame that cannot be decoded, -1 = none
+  std::string bad_reason;
+  FileIndex() { std::fill(palette_alpha, palette_alpha + 256, std::uint8_t{255}); }
+};
+
+// Walks the chunks of the PNG/APNG `file` (read from `path`, used in messages). Damage
+// before the first frame's data throws ApngError; later damage (bad CRC, truncation,
+// sequence errors, bad fcTL) is recorded in bad_frame/bad_reason against the frame it
+// belongs to, so the frames before it stay readable.
+FileIndex index_png(const std::vector<std::uint8_t>& file, const std::string& path);
 
 enum Filter : std::uint8_t { kNone = 0, kSub = 1, kUp = 2, kAverage = 3, kPaeth = 4 };
 
