@@ -169,7 +169,10 @@ std::string explain_cell(std::string_view text, int col) {
     case Kind::boolean:
       return is_bool(text) ? std::string()
                            : "expected True, False or an empty cell, found " + snippet(text);
-    case Kind::floats: return explain_list(content, spec);
+    case Kind::floats:
+      if (!text.empty() && text.front() != '"')
+        return "expected a double-quoted list \"[...]\", found " + snippet(text);
+      return explain_list(content, spec);
   }
   return {};
 }

@@ -50,7 +50,7 @@ ColumnRef column_ref(PoseTable& t, int col);
 // "text" shortened and escaped for an error message.
 std::string snippet(std::string_view text, std::size_t max_chars = 40);
 
-// Explains why a row failed. `failed_col` is the header cell where the hot loop stopped;
+// Explains why a row failed. `failed_cell` is the header cell where the hot loop stopped;
 // `header_cols` maps each header cell to a column index or -1. Returns "column 'x': ...".
 std::string explain_row(std::string_view row, std::size_t failed_cell,
                         const std::vector<std::string>& header,
@@ -75,15 +75,94 @@ inline const char* skip_spaces(const char* p, const char* end) {
   return p;
 }
 
+// ------------------------------------------------------------------------ numbers
+// Python's repr of a float is almost always "-?d+.d+" with at most 17 significant digits.
+// That shape is scanned 8 bytes at a time (branches depend on digit counts, not on every
+// digit), then fast_float's own Eisel-Lemire step (compute_float, to_float) rounds the
+// decimal to float32, so the result is bit-identical to fast_float::from_chars, which
+// handles everything else: exponents, nan/inf, >19 digits, the last bytes of a line.
+inline bool parse_float_generic(const char*& p, const char* end, float& out) {
+  const auto r = fast_float::from_chars(p, end, out);
+  if (r.ec != std::errc()) return false;
+  p = r.ptr;
+  return true;
+}
+
+inline std::uint64_t load8(const char* p) {
+  std::uint64_t v;
+  std::memcpy(&v, p, 8);
+  return v;
+}
+
+// Index of the first non-digit byte of 8 little-endian chars (8 if all are digits).
+inline unsigned digit_run(std::uint64_t v) {
+  const std::uint64_t hi = 0xF0F0F0F0F0F0F0F0ull, zeros = 0x3030303030303030ull;
+  const std::uint64_t z = ((v & hi) ^ zeros) | (((v + 0x0606060606060606ull) & hi) ^ zeros);
+  return z ? static_cast<unsigned>(__builtin_ctzll(z)) >> 3 : 8u;
+}
+
+// Value of the first k (1..8) digits of v: shift them to the top, pad with '0's.
+inline std::uint64_t digits_value(std::uint64_t v, unsigned k) {
+  const unsigned shift = (8 - k) * 8;
+  if (shift) v = (v << shift) | (0x3030303030303030ull >> (64 - shift));
+  return fast_float::parse_eight_digits_unrolled(v);
+}
+
+inline constexpr std::uint64_t kPow10[9] = {1, 10, 100, 1000, 10000, 100000, 1000000,
+                                            10000000, 100000000};
+
+// Appends the fraction digits at f (up to 3 chunks of 8) to w; returns how many there were,
+// or 0 when the fast path cannot take them (no digit, or more than 19 digits in all).
+inline unsigned append_fraction(const char* f, unsigned int_digits, std::uint64_t& w) {
+  unsigned total = 0;
+  for (int chunk = 0; chunk < 3; ++chunk) {
+    const std::uint64_t v = load8(f + total);
+    const unsigned k = digit_run(v);
+    if (int_digits + total + k > 19) return 0;  // w would overflow
+    if (k < 8) {
+      if (k) w = w * kPow10[k] + digits_value(v, k);
+      return total + k;
+    }
+    w = w * 100000000ull + fast_float::parse_eight_digits_unrolled(v);
+    total += 8;
+  }
+  return 0;
+}
+
+inline bool parse_float(const char*& p, const char* end, float& out) {
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+  if (end - p < 48) return parse_float_generic(p, end, out);  // loads read < 48 bytes ahead
+  const char* s = p + (*p == '-');
+  const std::uint64_t head = load8(s);
+  const unsigned ki = digit_run(head);  // integer digits
+  if (ki == 0 || ki == 8 || s[ki] != '.') return parse_float_generic(p, end, out);
+  std::uint64_t w = digits_value(head, ki);
+  const unsigned kf = append_fraction(s + ki + 1, ki, w);
+  const char* stop = s + ki + 1 + kf;
+  if (kf == 0 || *stop == 'e' || *stop == 'E') return parse_float_generic(p, end, out);
+  float v = 0;
+  if (w != 0) {
+    const auto am =
+        fast_float::compute_float<fast_float::binary_format<float>>(-static_cast<std::int64_t>(kf), w);
+    if (am.power2 < 0) return parse_float_generic(p, end, out);  // needs the slow path
+    fast_float::to_float(false, am, v);
+  }
+  out = *p == '-' ? -v : v;
+  p = stop;
+  return true;
+#else
+  return parse_float_generic(p, end, out);
+#endif
+}
+
 // "[a, b, ...]" with exactly n numbers (bare nan/inf allowed) -> out[0..n).
 inline bool scan_numbers(const char*& p, const char* end, float* out, int n) {
   if (p == end || *p != '[') return false;
   ++p;
   for (int i = 0; i < n; ++i) {
     p = skip_spaces(p, end);
-    const auto r = fast_float::from_chars(p, end, out[i]);
-    if (r.ec != std::errc()) return false;
-    p = skip_spaces(r.ptr, end);
+    if (!parse_float(p, end, out[i])) return false;
+    p = skip_spaces(p, end);
     if (p == end || *p != (i + 1 < n ? ',' : ']')) return false;
     ++p;
   }
@@ -104,24 +183,21 @@ inline bool scan_nested(const char*& p, const char* end, float* out, int outer, 
   return true;
 }
 
-// A list cell, quoted or not. An empty cell (or "") reads as NaNs: missing data.
+// A list cell. Every list here has at least two numbers, hence a comma, so pandas always
+// quoted it; an unquoted list would be several CSV cells and is rejected. An empty cell (or
+// "") reads as NaNs: missing data.
 inline bool scan_list_cell(const char*& p, const char* end, const ColumnSpec& s, float* out) {
-  const bool quoted = p < end && *p == '"';
-  const bool empty = quoted ? (p + 1 < end && p[1] == '"') : (p == end || *p == ',');
-  if (empty) {
-    p += quoted ? 2 : 0;
+  if (p == end || *p == ',' || (end - p >= 2 && p[0] == '"' && p[1] == '"')) {
+    p += (p < end && *p == '"') ? 2 : 0;
     std::fill(out, out + s.numbers(), std::numeric_limits<float>::quiet_NaN());
     return true;
   }
-  const char* q = p + (quoted ? 1 : 0);
+  if (*p != '"') return false;
+  const char* q = p + 1;
   const bool ok = s.outer ? scan_nested(q, end, out, s.outer, s.inner)
                           : scan_numbers(q, end, out, s.inner);
-  if (!ok) return false;
-  if (quoted) {
-    if (q == end || *q != '"') return false;
-    ++q;
-  }
-  p = q;
+  if (!ok || q == end || *q != '"') return false;
+  p = q + 1;
   return true;
 }
 

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "../../cpp/src/csv_internal.hpp"  // white-box: the number fast path
 #include "bsp/csv.hpp"
 #include "bsp/errors.hpp"
 
@@ -170,6 +171,38 @@ TEST_CASE("format_pyfloat round-trips random float32 values") {
   }
 }
 
+TEST_CASE("the number fast path is bit-identical to fast_float::from_chars") {
+  std::vector<std::string> cases = {
+      "0.0", "-0.0", "90.0", "-90.0", "1e-05", "0.0001", "0.00012345678901234567",
+      "123456789012345.0", "1234567.25", "12345678.0", "1.100000023841858", "-8.130000114440918",
+      "nan", "-nan", "inf", "-inf", "9.99994610111476e-41", "3.4028234663852886e+38", "3.5e+38",
+      "0.1", "1.", ".5", "-", "-x", "1.0000000596046448", "1.0000000596046447",  // float midpoints
+      "1.00000005960464477539", "16777217.0", "0.000000000000000000001", "99999999.5"};
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<std::uint32_t> bits;
+  std::uniform_real_distribution<double> uni(-2000, 2000);
+  char buf[kPyFloatMaxChars];
+  for (int i = 0; i < 200000; ++i) {
+    const std::uint32_t b = bits(rng);
+    float f;
+    std::memcpy(&f, &b, sizeof f);
+    cases.emplace_back(buf, format_pyfloat(static_cast<double>(f), buf));
+    cases.emplace_back(buf, format_pyfloat(uni(rng), buf));  // not float32-exact: must round
+  }
+  for (const std::string& c : cases) {
+    const std::string text = c + ", 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]";
+    const char* end = text.data() + text.size();
+    const char* p1 = text.data();
+    const char* p2 = text.data();
+    float a = -1, b = -1;
+    const bool ok1 = csv_detail::parse_float_generic(p1, end, a);
+    const bool ok2 = csv_detail::parse_float(p2, end, b);
+    REQUIRE_MESSAGE(ok1 == ok2, c);
+    REQUIRE_MESSAGE(p1 == p2, c);
+    REQUIRE_MESSAGE(std::memcmp(&a, &b, sizeof a) == 0, c);
+  }
+}
+
 TEST_CASE("read_pose_csv parses a tiny file") {
   TempDir tmp;
   std::string text = header_line() + join(row_cells(3)) + join(row_cells(5));
@@ -313,6 +346,11 @@ TEST_CASE("read_pose_csv errors name the file, line, column, expected and found"
     const std::string p = tmp.write("n.csv", with(21, "\"" + cell + "\""));
     CHECK(error_of(p) == p + ", line 3, column 'frame.pedestrian.pose.camera': expected a number "
                              "in list 4 at item 1, found '3.x'");
+  }
+  SUBCASE("unquoted list") {
+    const std::string p = tmp.write("u.csv", with(16, "[1.0, 2.0, 3.0]"));
+    CHECK(error_of(p) == p + ", line 3, column 'frame.pedestrian.velocity': expected a "
+                             "double-quoted list \"[...]\", found '[1.0'");
   }
   SUBCASE("bad int and bad bool") {
     std::string p = tmp.write("b.csv", with(11, "12a"));
