@@ -124,13 +124,37 @@ void store(const Vec3& c, std::uint8_t* px) {
     px[k] = static_cast<std::uint8_t>(std::lround(std::clamp(c[k], 0.0, 255.0)));
 }
 
+// Largest camera-forward distance of a road-frame box's corners.
+double ahead(const Vec3& lo, const Vec3& hi, const Vec3& origin, const Vec3& fwd) {
+  double d = -origin.dot(fwd);
+  for (int k = 0; k < 3; ++k) d += std::max(lo[k] * fwd[k], hi[k] * fwd[k]);
+  return d;
+}
+
+// Every pixel ray has camera-x > 0, so primitives wholly behind the camera plane can never
+// be hit: drop them once per image (about half of the street).
+Scene cull_behind(const Scene& sc, const Vec3& origin, const Vec3& fwd) {
+  Scene out;
+  out.road = sc.road, out.bands = sc.bands, out.light = sc.light;
+  for (const auto& b : sc.boxes)
+    if (ahead(b.lo, b.hi, origin, fwd) > 0) out.boxes.push_back(b);
+  for (const auto& c : sc.cylinders) {
+    const Vec3 lo(c.s - c.radius, c.w - c.radius, c.z0), hi(c.s + c.radius, c.w + c.radius, c.z1);
+    if (ahead(lo, hi, origin, fwd) > 0) out.cylinders.push_back(c);
+  }
+  for (const auto& s : sc.spheres)
+    if ((s.centre - origin).dot(fwd) + s.radius > 0) out.spheres.push_back(s);
+  return out;
+}
+
 }  // namespace
 
-void render_background(const Scene& sc, const Camera& cam, std::uint8_t* rgb,
+void render_background(const Scene& full, const Camera& cam, std::uint8_t* rgb,
                        std::uint8_t* tags, float* depth, int threads) {
   const int W = cam.width(), H = cam.height();
-  const Mat3 road_rt = sc.road.R.transpose();
-  const Vec3 origin = road_rt * (cam.pose.t - sc.road.t);
+  const Mat3 road_rt = full.road.R.transpose();
+  const Vec3 origin = road_rt * (cam.pose.t - full.road.t);
+  const Scene sc = cull_behind(full, origin, road_rt * cam.pose.R.col(0));
   const Vec3 sun = road_rt * sc.light.sun.normalized();
   parallel_for(static_cast<std::size_t>(H), 8, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t i = lo; i < hi; ++i) {

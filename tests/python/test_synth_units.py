@@ -120,7 +120,8 @@ def test_gait_keeps_bone_lengths_and_ground_contact():
     for stem in ("sk_female", "sk_girl"):
         rel = gait.walk(stem, 1.3, 90, 30.0, gait.GaitStyle())
         ref = np.array(bsp_fast.skeleton.reference_pose(stem))
-        np.testing.assert_allclose(rel[:, 2:, :3], np.broadcast_to(ref[2:, :3], rel[:, 2:, :3].shape))
+        np.testing.assert_allclose(rel[:, 2:, :3],
+                                   np.broadcast_to(ref[2:, :3], rel[:, 2:, :3].shape))
         mesh = geo.forward_kinematics(rel)
         lowest = mesh[:, [19, 20, 24, 25], 2].min(axis=1)
         assert np.all(lowest > -0.02) and np.all(lowest < 0.05)

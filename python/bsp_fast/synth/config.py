@@ -204,7 +204,9 @@ _YAML_KEYS = {"number_of_clips", "clip_length_in_frames", "pedestrian_distributi
               "camera_image_size", "batch_size", "seed", "crossing_probability",
               "waypoint_radius", "parallel_max_distance", "look_at_shift",
               "apng_drop_duplicates", "outputs_dir", "overwrite", "failure_multiplier",
-              "waypoint_jitter_scale"}
+              "waypoint_jitter_scale", "video_preset", "video_bitrate"}
+X264_PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow",
+                "slower", "veryslow")
 
 
 def load_yaml_config(path) -> dict:
@@ -289,6 +291,11 @@ def make_config(preset: str = "sample", overrides: dict | None = None) -> SynthC
     for k in ("waypoint_radius", "parallel_max_distance"):
         if k in opts and not float(opts[k]) >= 0:
             raise ValueError(f"{k}: expected a non-negative number, got {opts[k]!r}")
+    if opts.get("video_preset", "veryfast") not in X264_PRESETS:
+        raise ValueError(f"video_preset: expected one of {X264_PRESETS}, "
+                         f"got {opts['video_preset']!r}")
+    if "video_bitrate" in opts:
+        opts["video_bitrate"] = _positive_int(opts["video_bitrate"], "video_bitrate")
     if "look_at_shift" in opts:
         shift = opts["look_at_shift"]
         if not (isinstance(shift, (list, tuple)) and len(shift) == 2 and float(shift[1]) >= 0):
