@@ -78,8 +78,14 @@ def test_name_normalisation_and_map():
     assert normalise_name("thigh.R") == "rightthigh"
     assert normalise_name("RFoot") == "rightfoot" and normalise_name("lShldr") == "leftshldr"
     assert normalise_name("LowerBack") == "lowerback"  # not a left-side name
+    assert normalise_name("Bip01 L Thigh") == "leftthigh"
+    assert normalise_name("DEF-forearm.R") == "rightforearm"
     m = match_joints([b[0] for b in BONES])
     assert m["crl_thigh__L"] == 13 and m["crl_foot__R"] == 19 and m["crl_spine01__C"] == 2
+    # no hips by name: the thighs' nearest common ancestor stands in
+    names = ["RootNode", "Bip01 L Thigh", "Bip01 L Calf", "Bip01 R Thigh", "Bip01 R Calf"]
+    m = match_joints(names, [-1, 0, 1, 0, 3])
+    assert m["crl_hips__C"] == 0 and m["crl_leg__R"] == 4
 
 
 def test_loader_reads_the_file(tmp_path):
@@ -101,6 +107,55 @@ def test_retargeted_thigh_follows_the_bvh(tmp_path):
                                    thigh_angle(np.arange(60)), atol=0.2)
         hand = mesh[:, J["crl_hand__L"], 2] - mesh[:, J["crl_arm__L"], 2]
         assert np.all(hand < -0.2)  # arms lowered 75 degrees from the T-pose
+
+
+def write_gltf(path, frames=60):
+    """The same skeleton as a glTF 2.0 file (metres, Y up, +Z forward): thigh rotations as
+    LINEAR quaternion samplers in an embedded buffer."""
+    import base64
+    import json
+
+    index = {b[0]: i for i, b in enumerate(BONES)}
+    nodes = [{"name": n, "translation": [v / 100 for v in off]} for n, _, off in BONES]
+    for n, parent, _ in BONES:
+        if parent:
+            nodes[index[parent]].setdefault("children", []).append(index[n])
+    t = np.arange(frames, dtype=np.float32) / 30
+    blobs = [t.tobytes()]
+    acc = [{"bufferView": 0, "componentType": 5126, "count": frames, "type": "SCALAR",
+            "min": [0.0], "max": [float(t[-1])]}]
+    channels, samplers = [], []
+    for name, sign in (("LeftUpLeg", -1), ("RightUpLeg", 1)):
+        half = np.radians(sign * thigh_angle(np.arange(frames))) / 2
+        q = np.stack([np.sin(half), 0 * half, 0 * half, np.cos(half)], -1).astype(np.float32)
+        blobs.append(q.tobytes())
+        acc.append({"bufferView": len(blobs) - 1, "componentType": 5126, "count": frames,
+                    "type": "VEC4"})
+        samplers.append({"input": 0, "output": len(acc) - 1, "interpolation": "LINEAR"})
+        channels.append({"sampler": len(samplers) - 1,
+                         "target": {"node": index[name], "path": "rotation"}})
+    views, offset = [], 0
+    for b in blobs:
+        views.append({"buffer": 0, "byteOffset": offset, "byteLength": len(b)})
+        offset += len(b)
+    data = b"".join(blobs)
+    uri = "data:application/octet-stream;base64," + base64.b64encode(data).decode()
+    path.write_text(json.dumps({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": nodes,
+        "animations": [{"name": "walk", "channels": channels, "samplers": samplers}],
+        "accessors": acc, "bufferViews": views,
+        "buffers": [{"byteLength": len(data), "uri": uri}]}))
+    return path
+
+
+def test_gltf_animation_is_retargeted(tmp_path):
+    mo = Motion(str(write_gltf(tmp_path / "walk.gltf")))
+    assert mo.frames == 60
+    rel = mo.relative_poses("sk_male", 60, 30.0, phase=0.0)
+    mesh = geo.forward_kinematics(rel)
+    v = mesh[:, J["crl_leg__R"], :3] - mesh[:, J["crl_thigh__R"], :3]
+    np.testing.assert_allclose(np.degrees(np.arctan2(v[:, 1], -v[:, 2])),
+                               -thigh_angle(np.arange(60)), atol=0.2)
 
 
 def test_missing_joints_are_named(tmp_path):

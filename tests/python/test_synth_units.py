@@ -176,3 +176,12 @@ def test_render_bindings_check_shapes():
     assert set(np.unique(tags)) == {0, 13}  # no band: unlabeled ground, sky above
     with pytest.raises(ValueError, match="capsules"):
         core.render_bodies(rgb, tags, depth, z(6), 90.0, light, z((2, 3, 6)), z((3, 3)), 1)
+
+
+def test_batch_shares_the_street_not_the_walk():
+    from bsp_fast.synth import clip
+
+    cfg = make_config("sample", dict(batch_size=2, number_of_clips=3, seed=11))
+    a, b, c = (clip.plan_clip(cfg, i) for i in range(3))
+    assert a.street == b.street and a.street != c.street
+    assert a.id != b.id and not np.array_equal(a.path.sw, b.path.sw)

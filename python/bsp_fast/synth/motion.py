@@ -4,9 +4,10 @@ The file is read by assimp in the C++ core (bsp_fast._core.load_motion), resampl
 clip rate and retargeted onto the CARLA skeleton:
 
 1. Source joints are matched to CARLA joints by name (:data:`JOINT_MAP`, after
-   normalisation: namespace prefixes such as ``mixamorig:`` dropped, lower case, side
-   suffixes ``_L`` / ``.R`` turned into ``left`` / ``right`` prefixes, separators removed).
-   Hips, both thighs, legs (knees) and feet are required.
+   normalisation: namespace prefixes such as ``mixamorig:`` and ``Bip01`` dropped, lower
+   case, side tokens ``L`` / ``Right`` / ``_l`` turned into a ``left`` / ``right`` prefix,
+   separators removed). Hips (else the thighs' nearest common ancestor), both thighs, legs
+   (knees) and feet are required.
 2. Source axes are taken as Y up with the character facing +Z (BVH, glTF and Mixamo FBX
    convention; its left is +X). They map onto the CARLA mesh axes (x left, y forward,
    z up). Units do not matter: only directions are used.
@@ -77,22 +78,32 @@ SOURCE_TO_MESH = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, 1.0, 0]])
 
 
 def normalise_name(name: str) -> str:
-    """'mixamorig:LeftUpLeg' -> 'leftupleg', 'upperarm_L' -> 'leftupperarm'."""
+    """'mixamorig:LeftUpLeg' -> 'leftupleg', 'upperarm_L' -> 'leftupperarm',
+    'Bip01 L Thigh' -> 'leftthigh', 'LHip' -> 'lefthip'."""
     n = re.split(r"[:|]", name)[-1].lower()
-    m = re.match(r"^(.*?)[_.\- ]([lr])$", n)
-    if m:
-        n = ("left" if m.group(2) == "l" else "right") + m.group(1)
-    m = re.match(r"^([lr])[_.\- ](.*)$", n)
-    if m:
-        n = ("left" if m.group(1) == "l" else "right") + m.group(2)
-    n = re.sub(r"[_.\- ]", "", n)
+    tokens = [t for t in re.split(r"[_.\- ]+", n)
+              if t and t != "def" and not re.fullmatch(r"bip0*1", t)]  # Rigify, 3ds Max
+    side = ""
+    for t in tokens:
+        if t in ("l", "left", "r", "right"):
+            side = "left" if t[0] == "l" else "right"
+    n = side + "".join(t for t in tokens if t not in ("l", "left", "r", "right"))
     if n[:1] in ("l", "r") and ("left" + n[1:]) in _SIDED_NAMES:  # LHip, rShldr, RFoot
         n = ("left" if n[0] == "l" else "right") + n[1:]
     return n
 
 
-def match_joints(names) -> dict:
-    """CARLA joint name -> source node index for every joint that has a match."""
+def _ancestors(j: int, parents) -> list:
+    out = []
+    while j >= 0:
+        out.append(j)
+        j = parents[j]
+    return out
+
+
+def match_joints(names, parents=None) -> dict:
+    """CARLA joint name -> source node index for every joint that has a match. Without a
+    hips match, the nearest common ancestor of the two thighs stands for the hips."""
     index = {}
     for i, name in enumerate(names):
         index.setdefault(normalise_name(name), i)
@@ -102,6 +113,13 @@ def match_joints(names) -> dict:
             if c in index:
                 out[carla] = index[c]
                 break
+    if "crl_hips__C" not in out and parents is not None and \
+            "crl_thigh__L" in out and "crl_thigh__R" in out:
+        left = _ancestors(parents[out["crl_thigh__L"]], parents)
+        right = set(_ancestors(parents[out["crl_thigh__R"]], parents))
+        common = [j for j in left if j in right]
+        if common:
+            out["crl_hips__C"] = common[0]
     return out
 
 
@@ -167,14 +185,14 @@ class Motion:
         data = _core.load_motion(str(path), float(fps), 0)
         self.path, self.fps = str(path), float(fps)
         self.names = list(data["names"])
-        self.mapping = match_joints(self.names)
+        parents = [int(p) for p in data["parents"]]
+        self.mapping = match_joints(self.names, parents)
         missing = [j for j in REQUIRED if j not in self.mapping]
         if missing:
             raise _core.MotionError(
                 f"cannot retarget motion '{path}': no source joint for {missing}; joint names "
                 f"in the file: {self.names}; accepted names are listed in "
                 "bsp_fast.synth.motion.JOINT_MAP")
-        parents = list(data["parents"])
         to_mesh = lambda G: G[..., :3, 3] @ SOURCE_TO_MESH.T  # noqa: E731
         self.positions = _face_forward(to_mesh(_globals(data["local"], parents)), self.mapping,
                                        fps)
