@@ -338,3 +338,27 @@ def test_drop_duplicates_option(tmp_path):
                  apng_drop_duplicates=True, progress=False)
     im = Image.open(tmp_path / "d" / "clips" / f"{s['ids'][0]}-1.apng")
     assert 1 <= im.n_frames <= 30
+
+
+def test_joints_behind_the_camera_are_nan(tmp_path):
+    """A camera just behind the hips, looking along the walk: some joints fall behind it."""
+    from bsp_fast.csvio import write_csv
+
+    cfg = make_config("sample", dict(number_of_clips=1, clip_length_in_frames=30, seed=27,
+                                     camera_image_size=(320, 128)))
+    cp = synth_clip.plan_clip(cfg, 0)
+    yaw = np.radians(cp.path.yaw[0])
+    hips = cp.path.xyz[0]
+    cp.camera = np.array([hips[0] + 0.12 * np.cos(yaw), hips[1] + 0.12 * np.sin(yaw),
+                          hips[2], 0.0, np.degrees(yaw), 0.0])
+    per_frame = synth_clip.pose_columns(cp, cfg)
+    cols = synth_clip.csv_columns(cp, cfg, per_frame, np.zeros(30, bool))
+    uv = cols["frame.pedestrian.pose.camera"]
+    assert len(uv) > 0 and np.isnan(uv).any()
+    partial = np.isnan(uv).any(axis=(1, 2))
+    assert not cols["frame.pedestrian.pose.in_frame"][partial].any()
+    write_csv(tmp_path / "d.csv", cols)
+    text = (tmp_path / "d.csv").read_text()
+    assert "[nan, nan]" in text and "False" in text
+    back = read_csv(tmp_path / "d.csv")
+    np.testing.assert_array_equal(np.isnan(back["frame.pedestrian.pose.camera"]), np.isnan(uv))
