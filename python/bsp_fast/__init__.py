@@ -24,6 +24,8 @@ from .geometry import (  # noqa: E402
 from . import skeleton  # noqa: E402
 from .csvio import read_csv, write_csv  # noqa: E402
 from .conversion import convert  # noqa: E402
+from . import media, synth  # noqa: E402
+from .media import ApngReader, VideoReader  # noqa: E402
 
 Error = _core.Error
 CsvParseError = _core.CsvParseError
@@ -53,4 +55,5 @@ __all__ = [
     "rotation_matrix", "rotation_to_euler", "to_world", "transform_points", "skeleton",
     "diagnostics", "Error", "CsvParseError", "VideoDecodeError", "VideoEncodeError",
     "ApngError", "Hdf5Error", "MotionError", "set_num_threads", "num_threads", "convert",
+    "media", "synth", "VideoReader", "ApngReader",
 ]
