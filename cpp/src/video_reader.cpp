@@ -72,6 +72,11 @@ void VideoReader::Impl::open(int threads) {
   BSP_AV_CHECK(VideoDecodeError,
                avcodec_parameters_to_context(dec.get(), fmt->streams[stream]->codecpar), path,
                "decoder parameters");
+  // FFmpeg's own automatic choice is cores + 1 frame threads; one more decoding frame in
+  // flight keeps the cores busy while the caller's thread waits on the RGB converter
+  // (measured on 2 cores: 4 threads beat 3 by ~10 %).
+  if (threads == 0)
+    threads = static_cast<int>(std::min(16u, std::max(1u, std::thread::hardware_concurrency()) + 2));
   dec->thread_count = threads;
   dec->thread_type = FF_THREAD_FRAME | FF_THREAD_SLICE;
   // A damaged bitstream is an error naming the frame, not a silently concealed picture.

@@ -52,7 +52,7 @@ struct Crop {
 // per object (read() takes a lock); use one reader per thread or process.
 class VideoReader {
  public:
-  // threads: decoder threads, 0 = one per core.
+  // threads: decoder threads; 0 = cores + 2 (frame threading plus the converter thread).
   explicit VideoReader(std::string path, int threads = 0);
   ~VideoReader();
   VideoReader(const VideoReader&) = delete;
