@@ -110,6 +110,25 @@ def test_palette_equals_pillow(tmp_path, disposal, blend):
     np.testing.assert_array_equal(r.read(np.arange(len(r))), ref)
 
 
+# Pillow's writer itself cannot save palette frames after a BACKGROUND (or first-frame
+# PREVIOUS) disposal, hence patch_ops above; these combinations it can write.
+@pytest.mark.parametrize("disposal,blend", [
+    (NONE, OVER),
+    ([NONE, PREVIOUS, NONE, PREVIOUS, PREVIOUS, NONE, NONE, NONE], SOURCE),
+])
+def test_palette_pillow_written_ops(tmp_path, disposal, blend):
+    tags = tag_frames(8, w=40, h=30)
+    tags[3, :4, :4] = 0
+    path = tmp_path / "pal.apng"
+    ims = [Image.fromarray(t, "P") for t in tags]
+    for im in ims:
+        im.putpalette(media.CITYSCAPES_PALETTE.ravel().tolist())
+    ims[0].save(path, save_all=True, append_images=ims[1:], duration=33, transparency=0,
+                disposal=disposal, blend=blend)
+    _, ref = pillow_read(path)
+    np.testing.assert_array_equal(media.ApngReader(path).read(np.arange(len(ref))), ref)
+
+
 @pytest.mark.parametrize("disposal,blend", OPS)
 def test_rgba_patched_ops_equal_pillow(tmp_path, disposal, blend):
     path = tmp_path / "rgba.apng"
