@@ -139,3 +139,23 @@ def test_two_workers_over_a_converted_synth_sample_yield_each_clip_once(synth_sa
             assert b["inputs"].shape[1:] == (10, 26, 2)
             assert torch.isfinite(b["inputs"]).all() and torch.isfinite(b["targets"]).all()
         assert sorted(seen) == list(range(n))
+
+
+def test_plain_class_without_lightning(h5file, monkeypatch):
+    import sys
+
+    import bsp_fast.loaders.datamodule as dmod
+
+    for name in ("lightning", "lightning.pytorch", "pytorch_lightning"):
+        monkeypatch.setitem(sys.modules, name, None)  # makes the import fail
+    try:
+        plain = importlib.reload(dmod)
+        assert plain.LIGHTNING is False and plain.BSPDataModule.__mro__[1] is object
+        dm = plain.BSPDataModule(h5_path=h5file, task="lifting", batch_size=8)
+        dm.prepare_data()
+        dm.setup()
+        batch = next(iter(dm.test_dataloader()))
+        assert batch["targets"].shape == (8, 6, 26, 3)
+    finally:
+        monkeypatch.undo()
+        importlib.reload(dmod)

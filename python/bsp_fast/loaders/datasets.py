@@ -261,18 +261,24 @@ class ClipDataset(torch.utils.data.Dataset):
         return out
 
     def _rng(self, pos: np.ndarray, epoch: int) -> np.random.Generator:
+        # SFC64: ~15% faster normals than the default PCG64, and noise is most of the work
         if self.seed is None:  # train without a seed: fresh entropy (per worker, per batch)
-            return np.random.default_rng()
+            return np.random.Generator(np.random.SFC64())
         epoch = epoch if self.split == "train" else 0
         key = zlib.crc32(pos.tobytes())
-        return np.random.default_rng([self.seed, _SPLIT_CODE[self.split], epoch, key, len(pos)])
+        entropy = [self.seed, _SPLIT_CODE[self.split], epoch, key, len(pos)]
+        return np.random.Generator(np.random.SFC64(np.random.SeedSequence(entropy)))
 
     def _from_2d(self, reader: _Rows, rows: np.ndarray, rng) -> dict:
         pixels = reader.read(self._dataset("projection_2d"))
         if self.augment:
             pixels = self._augment(pixels, rng=rng, width=self._width[rows])
-        inputs = self._deform(pixels, rng=rng) if self._deforming else pixels
-        n = T.normalize_hips_neck(inputs)
+        vis = T.visible_joints(pixels)
+        if self._deforming:
+            inputs, vis = self._deform.apply(pixels, rng, vis)
+        else:
+            inputs = pixels
+        n = T.normalize_hips_neck(inputs, vis)
         out = dict(inputs=n.points, visible=n.visible, shift=n.shift, scale=n.scale)
         if self.with_pixels:
             out["pixels"] = pixels

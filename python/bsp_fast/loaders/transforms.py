@@ -39,6 +39,7 @@ HIPS, NECK = _sk.HIPS, _sk.NECK
 FALLBACK_SHIFT = -0.1059
 FALLBACK_SCALE = 0.5748
 _FLIP = np.asarray(_sk.FLIP_PERMUTATION, dtype=np.intp)
+_HUGE = 1e37  # penalty that keeps missing joints out of bbox minima/maxima
 
 
 def _to_numpy(x, dtype=np.float32):
@@ -110,16 +111,19 @@ def joint_bbox(points, visible=None, per: str = "frame"):
         raise ValueError(f"per must be 'frame' or 'clip', got {per!r}")
     vis = visible_joints(p) if visible is None else np.asarray(visible, bool)
     keep = p.shape[:-2] if per == "frame" else p.shape[:-3]
-    every = bool(vis.all())  # common case (clean clips): no masking pass
+    # (..., J) planes reduced over their last axis (~20x faster than reducing (..., J, 2)
+    # over the joint axis); missing joints pushed out of the way by a huge finite penalty,
+    # which is cheaper than np.where(vis, u, inf)
+    pen = None if vis.all() else np.multiply(~vis, np.float32(_HUGE), dtype=np.float32)
     corners = []
-    for fill, reduce in ((np.inf, np.min), (-np.inf, np.max)):
-        # (..., J) planes reduced over their last axis: ~20x faster than reducing
-        # (..., J, 2) over the joint axis
-        c = [reduce((p[..., k] if every else np.where(vis, p[..., k], fill)).reshape(keep + (-1,)),
-                    axis=-1) for k in (0, 1)]
+    for sign, reduce in ((1, np.min), (-1, np.max)):
+        c = []
+        for k in (0, 1):
+            plane = p[..., k] if pen is None else p[..., k] + sign * pen
+            c.append(reduce(plane.reshape(keep + (-1,)), axis=-1))
         corners.append(np.stack(c, -1))
     lo, hi = corners
-    empty = ~np.isfinite(lo[..., 0])
+    empty = lo[..., 0] > _HUGE / 2
     lo[empty] = 0
     hi[empty] = 0
     return lo, hi
@@ -163,7 +167,7 @@ def normalize_hips_neck(points, visible=None) -> NormalizedPose:
         shift[fallback] = centre
         scale[fallback] = FALLBACK_SCALE * s_b
     scale[~(scale > 0)] = 1.0
-    inv = np.where(vis, 1 / scale[..., None], 0).astype(np.float32)  # 0 zeroes missing joints
+    inv = np.multiply(vis, (1 / scale)[..., None], dtype=np.float32)  # 0 zeroes missing joints
     out = _affine(p, shift, inv, inverse=False)
     return NormalizedPose(back(out), back(shift), back(scale), back(vis), back(fallback))
 
@@ -289,6 +293,25 @@ def _rng(rng) -> np.random.Generator:
     return np.random.default_rng() if rng is None else rng
 
 
+def _torch():
+    try:
+        import torch
+    except ImportError:  # pragma: no cover - torch is a dependency of the loaders
+        return None
+    return torch
+
+
+def _normal(rng: np.random.Generator, shape) -> np.ndarray:
+    """float32 N(0, 1) of ``shape``, a function of ``rng``'s state. With torch installed the
+    numbers come from a torch generator seeded from ``rng`` (2.2x faster than NumPy's
+    float32 ziggurat; noise is the largest cost of a deformed batch)."""
+    torch = _torch()
+    if torch is None:
+        return rng.standard_normal(shape, dtype=np.float32)
+    g = torch.Generator().manual_seed(int(rng.integers(0, 2**63 - 1)))
+    return torch.randn(tuple(shape), generator=g, dtype=torch.float32).numpy()
+
+
 class HipsNeckNormalize:
     """Callable form of :func:`normalize_hips_neck` (returns a :class:`NormalizedPose`)."""
 
@@ -323,7 +346,7 @@ class GaussianNoise:
         if self.sigma == 0:
             return back(p.copy())
         vis = visible_joints(p)
-        noise = _rng(rng).standard_normal(p.shape, dtype=np.float32)
+        noise = _normal(_rng(rng), p.shape)
         noise *= np.float32(self.sigma)
         out = _keep(np.add(p, noise, out=noise), vis)
         return back(out)
@@ -397,22 +420,28 @@ class Deform(Compose):
         super().__init__([GaussianNoise(sigma), MissingJoints(p)])
 
     def __call__(self, points, rng=None, **context):
-        noise, missing = self.transforms
         p, back = _to_numpy(points)
+        out, _ = self.apply(p, rng)
+        return back(out)
+
+    def apply(self, p: np.ndarray, rng=None, visible=None) -> tuple:
+        """NumPy ``(deformed, visible)``; ``visible`` of the input may be given to save a
+        pass (the datasets know their stored clips have no missing joint)."""
+        noise, missing = self.transforms
         _check_points(p)
         if p.shape[-2] != len(missing.p):
             raise ValueError(f"points: expected {len(missing.p)} joints, got {p.shape[-2]}")
         rng = _rng(rng)
-        keep = visible_joints(p)
+        keep = visible_joints(p) if visible is None else np.array(visible, bool)
         if noise.sigma > 0:
-            out = rng.standard_normal(p.shape, dtype=np.float32)
+            out = _normal(rng, p.shape)
             out *= np.float32(noise.sigma)
             out += p
         else:
             out = p.copy()
         if np.any(missing.p > 0):
             keep &= rng.random(p.shape[:-1], dtype=np.float32) >= missing.p.astype(np.float32)
-        return back(_keep(out, keep))
+        return _keep(out, keep), keep
 
 
 class HorizontalFlip:
