@@ -1,8 +1,9 @@
 """PyTorch datasets, transforms and a Lightning DataModule over ``bsp-convert`` HDF5 files.
 
 (``bsp_fast.data`` holds package data, the skeleton YAML files, hence the name ``loaders``.)
-See docs/loaders.md. ``BSPDataModule`` is imported on first access, because importing
-Lightning takes seconds and the datasets and transforms do not need it.
+See docs/loaders.md. The transforms are plain NumPy; the torch-based names (``ClipDataset``,
+``ContiguousBatchSampler``, ...) and ``BSPDataModule`` (Lightning) are imported on first
+access, because importing torch and Lightning takes seconds.
 """
 from __future__ import annotations
 
@@ -26,8 +27,6 @@ from .transforms import (
     rotate,
     visible_joints,
 )
-from .sampling import ContiguousBatchSampler, IndexBatch, collate_batch
-from .datasets import DEFAULT_EVAL_SEED, LIFTING_TARGETS, SPLITS, TASKS, ClipDataset
 
 __all__ = [
     "ClipDataset", "BSPDataModule", "ContiguousBatchSampler", "IndexBatch", "collate_batch",
@@ -40,9 +39,19 @@ __all__ = [
 ]
 
 
-def __getattr__(name):
-    if name == "BSPDataModule":
-        from .datamodule import BSPDataModule
+_LAZY = {"ContiguousBatchSampler": "sampling", "IndexBatch": "sampling",
+         "collate_batch": "sampling", "ClipDataset": "datasets", "TASKS": "datasets",
+         "SPLITS": "datasets", "LIFTING_TARGETS": "datasets", "DEFAULT_EVAL_SEED": "datasets",
+         "BSPDataModule": "datamodule"}
 
-        return BSPDataModule
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
