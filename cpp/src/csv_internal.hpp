@@ -81,7 +81,8 @@ inline const char* skip_spaces(const char* p, const char* end) {
 // digit), then fast_float's own Eisel-Lemire step (compute_float, to_float) rounds the
 // decimal to float32, so the result is bit-identical to fast_float::from_chars, which
 // handles everything else: exponents, nan/inf, >19 digits, the last bytes of a line.
-inline bool parse_float_generic(const char*& p, const char* end, float& out) {
+[[gnu::noinline, gnu::cold]] inline bool parse_float_generic(const char*& p, const char* end,
+                                                            float& out) {
   const auto r = fast_float::from_chars(p, end, out);
   if (r.ec != std::errc()) return false;
   p = r.ptr;
@@ -129,7 +130,7 @@ inline unsigned append_fraction(const char* f, unsigned int_digits, std::uint64_
   return 0;
 }
 
-inline bool parse_float(const char*& p, const char* end, float& out) {
+[[gnu::always_inline]] inline bool parse_float(const char*& p, const char* end, float& out) {
 #if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
   if (end - p < 48) return parse_float_generic(p, end, out);  // loads read < 48 bytes ahead
   const char* s = p + (*p == '-');
