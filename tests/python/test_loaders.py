@@ -238,3 +238,22 @@ def test_bad_options_and_files(h5file, tmp_path):
     with pytest.raises(IndexError):
         ds[[len(ds)]]
     assert ds[-1]["meta"]["index"].item() == len(ds) - 1
+
+
+@pytest.mark.parametrize("task", ["lifting", "pose_estimation"])
+def test_worker_batches_equal_in_process_batches(h5file, task):
+    """Batches leave the workers packed in one shared buffer: same keys, dtypes, values."""
+    kw = dict(noise=5.0, mjp=0.2) if task == "lifting" else dict(with_mask=True)
+    ds = ClipDataset(h5file, "val", task, **kw)
+    for batch in ds.loader(batch_size=5, num_workers=2):
+        ref = ds.__getitems__(batch["meta"]["index"].tolist())
+        assert type(batch) is dict and set(batch) == set(ref)
+        for key in ref:
+            if key == "meta":
+                assert set(batch["meta"]) == set(ref["meta"])
+                for k, v in ref["meta"].items():
+                    got = batch["meta"][k]
+                    assert got == v if isinstance(v, list) else torch.equal(got, v), k
+            else:
+                assert batch[key].dtype == ref[key].dtype, key
+                assert torch.equal(batch[key], ref[key]), key

@@ -24,7 +24,7 @@ import torch
 import torch.utils.data
 
 from . import transforms as T
-from .sampling import ContiguousBatchSampler, collate_batch
+from .sampling import ContiguousBatchSampler, collate_batch, pack_batch
 
 __all__ = ["ClipDataset", "TASKS", "SPLITS", "LIFTING_TARGETS", "DEFAULT_EVAL_SEED"]
 
@@ -256,9 +256,14 @@ class ClipDataset(torch.utils.data.Dataset):
         out["label"] = self._labels[rows]
         if self.task == "classification":
             out["targets"] = out["label"]
-        out = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in out.items()}
-        out["meta"] = self._meta_batch(pos, rows, reader)
-        return out
+        meta = self._meta_batch(pos, rows, reader)
+        strings = {k: self._meta[k][rows].tolist() for k in _META_STR}
+        if torch.utils.data.get_worker_info() is not None:  # leaving a worker: one buffer
+            return pack_batch(out, meta, strings)
+        batch = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in out.items()}
+        batch["meta"] = {k: torch.from_numpy(v) for k, v in meta.items()}
+        batch["meta"].update(strings)
+        return batch
 
     def _rng(self, pos: np.ndarray, epoch: int) -> np.random.Generator:
         # SFC64: ~15% faster normals than the default PCG64, and noise is most of the work
@@ -318,11 +323,10 @@ class ClipDataset(torch.utils.data.Dataset):
         return out
 
     def _meta_batch(self, pos, rows, reader: _Rows) -> dict:
-        meta = {k: self._meta[k][rows].tolist() for k in _META_STR}
-        meta.update({k: torch.from_numpy(self._meta[k][rows]) for k in _META_INT})
-        meta["frames"] = torch.from_numpy(reader.read(self._dataset("targets/frame_idx")))
-        meta["index"] = torch.from_numpy(pos)
-        meta["row"] = torch.from_numpy(rows)
+        meta = {k: self._meta[k][rows] for k in _META_INT}
+        meta["frames"] = reader.read(self._dataset("targets/frame_idx"))
+        meta["index"] = pos
+        meta["row"] = rows
         return meta
 
     # ----------------------------------------------------------------- loaders
