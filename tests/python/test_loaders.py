@@ -257,3 +257,10 @@ def test_worker_batches_equal_in_process_batches(h5file, task):
             else:
                 assert batch[key].dtype == ref[key].dtype, key
                 assert torch.equal(batch[key], ref[key]), key
+
+
+def test_balancing_a_split_without_one_class_leaves_it_empty(h5file):
+    rows = np.flatnonzero(stored(h5file, "train", "labels") == 0)[:5]
+    with pytest.warns(UserWarning, match="balancing leaves no clip"):
+        ds = ClipDataset(h5file, "train", "classification", indices=rows, balance=True)
+    assert len(ds) == 0 and list(ds.loader(4)) == []

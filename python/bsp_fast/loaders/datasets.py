@@ -15,6 +15,7 @@ collated dict, so loaders use :func:`collate_batch` (``ClipDataset.loader`` sets
 from __future__ import annotations
 
 import os
+import warnings
 import weakref
 import zlib
 from pathlib import Path
@@ -176,9 +177,9 @@ class ClipDataset(torch.utils.data.Dataset):
     def _balanced(self, rows: np.ndarray) -> np.ndarray:
         labels = self._labels[rows]
         counts = np.bincount(labels, minlength=2)
-        if counts.min() == 0:
-            raise ValueError(f"balance: /{self.split} has class counts {counts.tolist()}; "
-                             "cannot balance a split missing a class")
+        if counts.min() == 0:  # the converter's rule gives an empty split: say so
+            warnings.warn(f"balance: /{self.split} of {self.h5_path} has class counts "
+                          f"{counts.tolist()}; balancing leaves no clip", stacklevel=3)
         keep = np.concatenate([np.flatnonzero(labels == c)[:counts.min()] for c in range(2)])
         return rows[np.sort(keep)]
 
