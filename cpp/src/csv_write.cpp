@@ -19,8 +19,12 @@
 namespace bsp {
 
 std::size_t format_pyfloat(double v, char* out) {
-  if (std::isnan(v)) return std::memcpy(out, "nan", 3), 3;
-  if (std::isinf(v)) return v < 0 ? (std::memcpy(out, "-inf", 4), 4) : (std::memcpy(out, "inf", 3), 3);
+  const char* special = std::isnan(v) ? "nan" : !std::isinf(v) ? nullptr : v < 0 ? "-inf" : "inf";
+  if (special) {
+    const std::size_t n = std::strlen(special);
+    std::memcpy(out, special, n);
+    return n;
+  }
   char buf[40];  // shortest round trip, "[-]d[.ddd]e(+|-)xx"
   const char* stop = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::scientific).ptr;
   const char* p = buf;
@@ -36,15 +40,16 @@ std::size_t format_pyfloat(double v, char* out) {
   if (negative_exp) e = -e;
   if (e < -4 || e >= 16) {  // Python's repr switches to exponent notation here
     *o++ = digits[0];
-    if (n > 1) *o++ = '.', o = std::copy(digits + 1, digits + n, o);
+    if (n > 1) {
+      *o++ = '.';
+      o = std::copy(digits + 1, digits + n, o);
+    }
     *o++ = 'e';
     *o++ = e < 0 ? '-' : '+';
-    const int a = std::abs(e);
-    if (a < 10) *o++ = '0';
-    o = std::to_chars(o, o + 4, a).ptr;
+    if (std::abs(e) < 10) *o++ = '0';  // at least two exponent digits: 1e-05
+    o = std::to_chars(o, o + 4, std::abs(e)).ptr;
   } else if (e < 0) {  // 0.000ddd
-    *o++ = '0', *o++ = '.';
-    o = std::fill_n(o, -e - 1, '0');
+    o = std::copy_n("0.000", 1 - e, o);
     o = std::copy(digits, digits + n, o);
   } else if (e + 1 < n) {  // ddd.ddd
     o = std::copy(digits, digits + e + 1, o);
@@ -53,7 +58,7 @@ std::size_t format_pyfloat(double v, char* out) {
   } else {  // ddd000.0
     o = std::copy(digits, digits + n, o);
     o = std::fill_n(o, e + 1 - n, '0');
-    *o++ = '.', *o++ = '0';
+    o = std::copy_n(".0", 2, o);
   }
   return static_cast<std::size_t>(o - out);
 }

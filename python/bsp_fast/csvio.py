@@ -180,22 +180,28 @@ def read_csv(path: str | os.PathLike, columns: Iterable[str] | None = None,
     return CsvTable(_core.read_pose_csv(path, names, threads, bool(check_duplicates)))
 
 
+def _is_missing(v: Any) -> bool:
+    """None, NaN, pandas.NA or NaT: pandas writes these as an empty cell."""
+    if v is None:
+        return True
+    if isinstance(v, float):
+        return math.isnan(v)
+    return type(v).__name__ in ("NAType", "NaTType")
+
+
 def _string_column(values: Any, rows: int) -> tuple[list[str], np.ndarray]:
     arr = np.asarray(values, dtype=object).reshape(-1)
     index: dict[str, int] = {}
     codes = np.empty(len(arr), dtype=np.int32)
     for i, v in enumerate(arr):
-        if v is None or (isinstance(v, float) and math.isnan(v)):
-            v = ""  # pandas writes a missing value as an empty cell
-        codes[i] = index.setdefault(str(v), len(index))
+        codes[i] = index.setdefault("" if _is_missing(v) else str(v), len(index))
     return list(index), codes
 
 
 def _bool_column(name: str, values: Any, mask: Any) -> tuple[np.ndarray, np.ndarray]:
     arr = np.asarray(values)
     if arr.dtype == object:
-        ok = np.array([not (v is None or (isinstance(v, float) and math.isnan(v))) for v in arr],
-                      dtype=bool)
+        ok = np.array([not _is_missing(v) for v in arr], dtype=bool)
         val = np.array([bool(v) if k else False for v, k in zip(arr, ok)], dtype=bool)
     elif arr.dtype.kind == "f":
         ok = ~np.isnan(arr)

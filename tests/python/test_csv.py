@@ -268,7 +268,8 @@ def pandas_frame(cols: dict) -> pd.DataFrame:
         if name in SHAPES:
             data[name] = pd.Series(list(np.asarray(v, np.float32).tolist()), dtype=object)
         elif name in BOOLS:
-            data[name] = pd.Series([None if (isinstance(x, float) and math.isnan(x)) else bool(x)
+            data[name] = pd.Series([None if x is None or x is pd.NA or (
+                                        isinstance(x, float) and math.isnan(x)) else bool(x)
                                     for x in np.asarray(v, dtype=object)], dtype=object)
         else:
             data[name] = list(v)
@@ -308,6 +309,24 @@ def test_read_back_matches_pandas_literal_eval(tmp_path):
     for threads in (1, 2):
         bsp_fast.write_csv(tmp_path / "again.csv", t, threads=threads)
         assert (tmp_path / "again.csv").read_bytes() == p.read_bytes()
+
+
+def test_write_nullable_pandas_columns_like_pandas(tmp_path):
+    cols = random_columns(5)
+    seg = pd.array([True, None, False, None, True], dtype="boolean")
+    model = pd.array(["m1", None, "m1", "m,2", "m,2"], dtype="string")
+    cols["frame.pedestrian.pose.in_segmentation"] = seg
+    cols["pedestrian.model"] = model
+    p = tmp_path / "n.csv"
+    bsp_fast.write_csv(p, cols)
+    frame = pandas_frame(cols)
+    frame["frame.pedestrian.pose.in_segmentation"] = seg  # pandas writes pd.NA as ""
+    frame["pedestrian.model"] = model
+    assert p.read_bytes() == frame.to_csv(index=False).encode()
+    t = bsp_fast.read_csv(p)
+    np.testing.assert_array_equal(t.valid("frame.pedestrian.pose.in_segmentation"),
+                                  [True, False, True, False, True])
+    assert list(t["pedestrian.model"]) == ["m1", "", "m1", "m,2", "m,2"]
 
 
 def test_write_bool_forms_and_validation(tmp_path):
