@@ -9,6 +9,10 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
+#include <set>
+#include <stdexcept>
+#include <tuple>
 
 #include "bsp/camera.hpp"
 #include "bsp/convert_internal.hpp"
@@ -43,16 +47,19 @@ std::uint32_t file_crc32(const std::string& path, std::uint64_t& bytes) {
   return crc;
 }
 
-const std::vector<std::string>& needed_columns() {
-  static const std::vector<std::string> c = {
+std::vector<std::string> needed_columns(bool media) {
+  std::vector<std::string> c = {
       "id", "world.map", "camera.idx", "camera.transform", "camera.width", "camera.height",
       "pedestrian.idx", "pedestrian.model", "pedestrian.age", "pedestrian.gender", "frame.idx",
       "camera.recording", "frame.pedestrian.transform", "frame.pedestrian.velocity",
       "frame.pedestrian.pose.world", "frame.pedestrian.pose.component",
       "frame.pedestrian.pose.relative", "frame.pedestrian.is_crossing",
       "frame.pedestrian.pose.camera"};
+  if (media) c.push_back("camera.semantic_segmentation");
   return c;
 }
+
+using RecordingKey = std::tuple<std::int32_t, std::int64_t, std::int64_t>;
 
 RowKeys keys_of(const PoseTable& t) {
   RowKeys k;
@@ -72,6 +79,23 @@ std::string label_rule(const ClipOptions& c) {
   if (c.benchmark) return "video";
   if (c.label_fraction > 0) return "any:" + std::to_string(c.label_fraction);
   return "last";
+}
+
+std::string deflate_name(int level) {
+  return level > 0 ? "shuffle+deflate:" + std::to_string(level) : std::string("none");
+}
+
+void media_attrs(const h5::Group& g, const MediaOptions& m) {
+  g.attr("media", std::int64_t{m.enabled});
+  if (!m.enabled) return;
+  g.attr("crop_size", std::int64_t{m.crop_size});
+  g.attr("crop_scale", kCropScale);
+  g.attr("crop_min_size", std::int64_t{kCropMinSize});
+  g.attr("visibility_radius", std::int64_t{kVisibilityRadius});
+  g.attr("pedestrian_tag", std::int64_t{kPedestrianTag});
+  g.attr("media_compression", "frames/rgb " + deflate_name(m.rgb_level) + ", frames/mask " +
+                                  deflate_name(m.mask_level));
+  g.attr("skip_bad_media", std::int64_t{m.skip_bad_media});
 }
 
 void root_attrs(const h5::Group& g, const ConvertOptions& o, const ConvertReport& r) {
@@ -100,6 +124,7 @@ void root_attrs(const h5::Group& g, const ConvertOptions& o, const ConvertReport
   g.attr("source_path", o.source_path);
   g.attr("source_crc32", static_cast<std::int64_t>(r.source_crc32));
   g.attr("source_bytes", static_cast<std::int64_t>(r.source_bytes));
+  media_attrs(g, o.media);
   for (const auto& [k, v] : o.extra_attrs) g.attr(k, v);
   for (int s = 0; s < 3; ++s) {
     g.attr(std::string("class_counts_") + kSplitNames[s],
@@ -128,38 +153,71 @@ void fill_report(ConvertReport& r, const PoseTable& t, const Plan& plan) {
   r.clips_dropped_by_balance = plan.clips_dropped_by_balance;
 }
 
-}  // namespace
-
-ConvertReport convert_csv(const std::string& csv_path, const std::string& out_path,
-                          const ConvertOptions& opt, ConvertProgress* progress) {
-  ConvertReport report;
-  auto t0 = Clock::now();
-  report.source_crc32 = file_crc32(csv_path, report.source_bytes);
-  if (progress) progress->total = report.source_bytes;
-  CsvReadOptions ro;
-  ro.columns = needed_columns();
-  ro.threads = opt.threads;
-  const PoseTable table = read_pose_csv(csv_path, ro);
-  report.seconds["read"] = since(t0);
-  if (progress) progress->done = report.source_bytes, progress->stage = 1;
-
-  t0 = Clock::now();
-  const Plan plan = plan_clips(keys_of(table), opt.clips);
-  fill_report(report, table, plan);
-  report.seconds["plan"] = since(t0);
-
-  if (opt.verify) {
-    if (progress) progress->stage = 2;
-    t0 = Clock::now();
-    report.verify = detail::verify_recordings(table, plan, opt.fov, opt.threads);
-    for (const VerifyRow& v : report.verify)
-      if (!(v.component_mm <= opt.verify_tol_mm && v.world_mm <= opt.verify_world_tol_mm &&
-            v.camera_px <= opt.verify_tol_px))
-        report.verify_failed.push_back(v.recording);
-    report.seconds["verify"] = since(t0);
+// plan_clips over the rows of every recording not in `excluded`, with Recording::rows
+// mapped back to rows of `t` (media left out with skip_bad_media: as if never recorded).
+Plan plan_excluding(const PoseTable& t, const ClipOptions& o, const std::set<RecordingKey>& excluded) {
+  if (excluded.empty()) return plan_clips(keys_of(t), o);
+  std::vector<std::size_t> keep;
+  for (std::size_t r = 0; r < t.rows; ++r)
+    if (!excluded.count({t.id.codes[r], t.camera_idx[r], t.pedestrian_idx[r]})) keep.push_back(r);
+  std::vector<std::int32_t> id;
+  std::vector<std::int64_t> cam, ped, frame, width, height;
+  std::vector<std::uint8_t> crossing;
+  std::vector<float> uv;
+  for (std::size_t r : keep) {
+    id.push_back(t.id.codes[r]), cam.push_back(t.camera_idx[r]), ped.push_back(t.pedestrian_idx[r]);
+    frame.push_back(t.frame_idx[r]), crossing.push_back(t.is_crossing[r]);
+    width.push_back(t.camera_width[r]), height.push_back(t.camera_height[r]);
+    uv.insert(uv.end(), &t.pose_camera[r * 52], &t.pose_camera[r * 52] + 52);
   }
+  RowKeys k;
+  k.rows = keep.size();
+  k.id_code = id.data(), k.camera_idx = cam.data(), k.pedestrian_idx = ped.data();
+  k.frame_idx = frame.data(), k.is_crossing = crossing.data(), k.pose_camera = uv.data();
+  k.width = width.data(), k.height = height.data();
+  Plan plan = plan_clips(k, o);
+  for (Recording& rec : plan.recordings)
+    for (std::size_t& r : rec.rows) r = keep[r];
+  return plan;
+}
 
-  t0 = Clock::now();
+std::string media_root(const std::string& csv_path) {
+  const std::string dir = std::filesystem::path(csv_path).parent_path().string();
+  return dir.empty() ? std::string(".") : dir;
+}
+
+void check_media_options(const MediaOptions& m) {
+  if (!m.enabled) return;
+  if (m.crop_size < 8 || m.crop_size > 1024)
+    throw std::invalid_argument("crop size must lie in [8, 1024], got " + std::to_string(m.crop_size));
+  if (m.rgb_level < 0 || m.rgb_level > 9 || m.mask_level < 0 || m.mask_level > 9)
+    throw std::invalid_argument("deflate levels of the frame table must lie in [0, 9] (0 = none)");
+  if (m.chunk_frames < 1) throw std::invalid_argument("chunk_frames must be positive");
+}
+
+// What the media stage of one pass works on.
+struct MediaPlan {
+  std::vector<detail::MediaFiles> files;
+  std::array<detail::FrameTable, 3> tables;
+};
+
+// Adds the recordings of `failures` to `excluded` and their files to the report's list.
+void exclude(const Plan& plan, const std::vector<detail::MediaFailure>& failures,
+             std::set<RecordingKey>& excluded, std::vector<BadMedia>& bad) {
+  for (const auto& f : failures) {
+    const Recording& rec = plan.recordings[f.recording];
+    excluded.insert({rec.id_code, rec.camera_idx, rec.pedestrian_idx});
+    bad.push_back({f.path, f.reason});
+  }
+}
+
+// Writes the whole file. Returns the recordings whose media failed while decoding (only
+// with skip_bad_media); the file is then incomplete and the caller converts again.
+std::vector<detail::MediaFailure> write_output(const std::string& out_path, const PoseTable& table,
+                                               const Plan& plan, const MediaPlan* media,
+                                               const ConvertOptions& opt, ConvertReport& report,
+                                               ConvertProgress* progress) {
+  auto t0 = Clock::now();
   if (progress) {
     progress->done = 0;
     progress->total = report.clips[0] + report.clips[1] + report.clips[2];
@@ -168,17 +226,104 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
   h5::File file = h5::File::create(out_path);
   const h5::Group root = file.root();
   root_attrs(root, opt, report);
+  std::vector<h5::Group> groups;
   for (int s = 0; s < 3; ++s) {
-    const h5::Group g = root.create_group(kSplitNames[s]);
+    groups.push_back(root.create_group(kSplitNames[s]));
+    const h5::Group& g = groups.back();
     g.attr("class_counts", std::vector<std::int64_t>{static_cast<std::int64_t>(report.class_counts[s][0]),
                                                      static_cast<std::int64_t>(report.class_counts[s][1])});
     g.attr("recordings", static_cast<std::int64_t>(report.recordings_per_split[s]));
     detail::write_split(g, table, plan, plan.splits[s], opt.clips.length, opt, progress);
   }
-  file.close();
   report.seconds["write"] = since(t0);
-  if (progress) progress->stage = 4;
-  return report;
+  std::vector<detail::MediaFailure> failed;
+  if (media) {
+    t0 = Clock::now();
+    if (progress) {
+      progress->done = 0;
+      progress->total = media->tables[0].frames() + media->tables[1].frames() + media->tables[2].frames();
+      progress->stage = 6;
+    }
+    failed = detail::write_media(std::array<const h5::Group*, 3>{&groups[0], &groups[1], &groups[2]},
+                                 table, media->tables, media->files, opt, progress);
+    report.seconds["media"] = since(t0);
+  }
+  file.close();
+  return failed;
+}
+
+// Plans the media of a pass and opens every file. Returns the failures (thrown without
+// skip_bad_media) and fills `media` when there are none.
+std::vector<detail::MediaFailure> plan_media(const PoseTable& table, const Plan& plan,
+                                             const std::string& root, const ConvertOptions& opt,
+                                             MediaPlan& media, ConvertProgress* progress) {
+  media.files = detail::media_files(table, plan, root);  // refuses unsafe paths first
+  for (int s = 0; s < 3; ++s)
+    media.tables[s] = detail::plan_frame_table(plan, plan.splits[s], opt.clips.length);
+  auto failed = detail::check_media(table, media.tables, media.files, opt.threads, progress);
+  if (!failed.empty() && !opt.media.skip_bad_media) std::rethrow_exception(failed.front().error);
+  return failed;
+}
+
+}  // namespace
+
+ConvertReport convert_csv(const std::string& csv_path, const std::string& out_path,
+                          const ConvertOptions& opt, ConvertProgress* progress) {
+  check_media_options(opt.media);
+  ConvertReport base;
+  auto t0 = Clock::now();
+  base.source_crc32 = file_crc32(csv_path, base.source_bytes);
+  if (progress) progress->total = base.source_bytes;
+  CsvReadOptions ro;
+  ro.columns = needed_columns(opt.media.enabled);
+  ro.threads = opt.threads;
+  const PoseTable table = read_pose_csv(csv_path, ro);
+  base.seconds["read"] = since(t0);
+  if (progress) progress->done = base.source_bytes, progress->stage = 1;
+
+  std::set<RecordingKey> excluded;
+  std::vector<BadMedia> bad;
+  double check_seconds = 0;
+  for (int pass = 1;; ++pass) {
+    ConvertReport report = base;
+    t0 = Clock::now();
+    const Plan plan = plan_excluding(table, opt.clips, excluded);
+    fill_report(report, table, plan);
+    report.seconds["plan"] = since(t0);
+    MediaPlan media;
+    if (opt.media.enabled) {
+      t0 = Clock::now();
+      auto failed = plan_media(table, plan, media_root(csv_path), opt, media, progress);
+      check_seconds += since(t0);
+      if (!failed.empty()) {
+        exclude(plan, failed, excluded, bad);
+        continue;
+      }
+    }
+    if (opt.verify) {
+      if (progress) progress->stage = 2;
+      t0 = Clock::now();
+      report.verify = detail::verify_recordings(table, plan, opt.fov, opt.threads);
+      for (const VerifyRow& v : report.verify)
+        if (!(v.component_mm <= opt.verify_tol_mm && v.world_mm <= opt.verify_world_tol_mm &&
+              v.camera_px <= opt.verify_tol_px))
+          report.verify_failed.push_back(v.recording);
+      report.seconds["verify"] = since(t0);
+    }
+    auto failed = write_output(out_path, table, plan, opt.media.enabled ? &media : nullptr, opt,
+                               report, progress);
+    if (!failed.empty()) {
+      exclude(plan, failed, excluded, bad);
+      continue;
+    }
+    for (int s = 0; s < 3; ++s) report.media.frames[s] = media.tables[s].frames();
+    report.media.check_seconds = check_seconds;
+    report.media.seconds = check_seconds + (opt.media.enabled ? report.seconds["media"] : 0.0);
+    report.media.bad = std::move(bad);
+    report.media.passes = pass;
+    if (progress) progress->stage = 4;
+    return report;
+  }
 }
 
 }  // namespace bsp

@@ -8,6 +8,10 @@ Terminology, used the same way in the CLI, the API and the HDF5 attributes:
   is ``L - offset`` frames. The HDF5 file stores it as ``clip_stride``.
 * **eval clip offset**: the same for the val and test splits (default: the train offset),
   so evaluation windows need not overlap like training windows.
+* **media**: per split, a frame table of S x S pedestrian crops (RGB from the MP4, class
+  tags from the segmentation APNG) with mask statistics and per-joint visibility; every
+  frame a clip uses is stored once and clips point into it (``clip_frames``). See
+  docs/hdf5-schema.md.
 """
 from __future__ import annotations
 
@@ -26,7 +30,8 @@ __all__ = ["convert", "main", "format_report", "DEFAULTS"]
 
 DEFAULTS = dict(clip_length=30, benchmark_clip_length=16, benchmark_clip_offset=6,
                 val_frac=0.2, test_frac=0.2, seed=22742, fov=90.0)
-_STAGES = ("reading data.csv", "planning clips", "verifying poses", "writing clips", "done")
+_STAGES = ("reading data.csv", "planning clips", "verifying poses", "writing clips", "done",
+           "checking media files", "cropping media frames")
 
 
 def _dataset_csv(dataset) -> tuple[Path, Path]:
@@ -81,7 +86,8 @@ def _positive(name, v, allow_none=True):
 def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_offset=None,
             fov=None, min_video_length=None, label="last", benchmark=False, val_frac=0.2,
             test_frac=0.2, seed=22742, balance=False, threads=None, verify=False,
-            compress=False, force=False, progress=False) -> dict:
+            compress=False, media=True, crop_size=128, skip_bad_media=False, force=False,
+            progress=False) -> dict:
     """Converts a CARLA-BSP dataset into train/val/test clips in one HDF5 file.
 
     ``dataset`` is the dataset directory (or its data.csv). ``clip_length`` defaults to 30
@@ -92,8 +98,17 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
     config.yaml, else 90 degrees. The output is written under a temporary name and renamed
     when complete; an existing ``out_path`` is kept unless ``force``.
 
+    ``media`` (default on) decodes each recording's MP4 and segmentation APNG once and
+    stores ``crop_size`` x ``crop_size`` pedestrian crops (RGB and class tags), mask
+    statistics and joint visibility of every frame the clips use. A missing or broken media
+    file fails the conversion naming the file, unless ``skip_bad_media``: then its
+    recording is left out (the split is planned without it) and listed in
+    ``report["media"]["bad"]``. Media paths in data.csv that are absolute or leave the
+    dataset root (``..``) are refused before anything is opened.
+
     Returns the report: rows, recordings, clips per split and class, skipped recordings
-    and why, seconds per stage (and the verification table with ``verify``).
+    and why, seconds per stage, ``media`` (frames per split, seconds, crops_per_second,
+    bad files and why) and, with ``verify``, the verification table.
     """
     root, csv = _dataset_csv(dataset)
     out = Path(out_path)
@@ -107,6 +122,8 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
                     ("eval_clip_offset", eval_clip_offset), ("min_video_length", min_video_length),
                     ("threads", threads)):
         _positive(name, v)
+    if not isinstance(crop_size, int) or isinstance(crop_size, bool) or not 8 <= crop_size <= 1024:
+        raise ValueError(f"crop_size must be an integer in [8, 1024], got {crop_size!r}")
     for name, v in (("val_frac", val_frac), ("test_frac", test_frac)):
         if not (isinstance(v, (int, float)) and 0 <= v < 1):
             raise ValueError(f"{name} must lie in [0, 1), got {v!r}")
@@ -124,13 +141,16 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
                     min_video_length=min_video_length or clip_length, label=label,
                     benchmark=bool(benchmark), val_frac=val_frac, test_frac=test_frac,
                     seed=int(seed), balance=bool(balance), fov=float(fov), fov_source=fov_source,
-                    compress=bool(compress))
+                    compress=bool(compress), media=bool(media),
+                    crop_size=int(crop_size) if media else None,
+                    skip_bad_media=bool(skip_bad_media) if media else None)
     options = dict(clip_length=clip_length, clip_stride=clip_offset,
                    eval_clip_stride=eval_clip_offset or 0, min_video_length=min_video_length or 0,
                    label_fraction=_label_fraction(label), benchmark=bool(benchmark),
                    val_frac=float(val_frac), test_frac=float(test_frac), seed=int(seed),
                    balance=bool(balance), fov=float(fov), threads=int(threads or 0),
-                   verify=bool(verify), compress=bool(compress),
+                   verify=bool(verify), compress=bool(compress), media=bool(media),
+                   crop_size=int(crop_size), skip_bad_media=bool(skip_bad_media),
                    source_path=str(root.resolve()),
                    extra_attrs={"settings_json": json.dumps(settings, sort_keys=True)})
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -182,6 +202,11 @@ def _run(csv: str, tmp: str, options: dict, show_progress: bool) -> dict:
         raise result["error"]
     report = result["report"]
     report["seconds"]["total"] = time.perf_counter() - t0
+    media = report["media"]
+    media["enabled"] = bool(options.get("media", True))
+    frames = sum(media["frames"].values())
+    decode = report["seconds"].get("media", 0.0)
+    media["crops_per_second"] = frames / decode if decode > 0 else math.nan
     return report
 
 
@@ -193,6 +218,10 @@ def _bar(stage: int, total: int):
         return tqdm(total=total, desc=name, unit="B", unit_scale=True, file=sys.stderr)
     if stage == 3:
         return tqdm(total=total, desc=name, unit="clip", file=sys.stderr)
+    if stage == 5:
+        return tqdm(total=total, desc=name, unit="recording", file=sys.stderr)
+    if stage == 6:
+        return tqdm(total=total, desc=name, unit="frame", file=sys.stderr)
     return None
 
 
@@ -213,6 +242,15 @@ def format_report(r: dict) -> str:
                  f"{mb / max(sec.get('read', 1e-9), 1e-9):,.0f} MB/s), plan {sec.get('plan', 0):.2f} s, "
                  + (f"verify {sec['verify']:.2f} s, " if "verify" in sec else "")
                  + f"write {sec.get('write', 0):.2f} s, total {sec.get('total', 0):.2f} s")
+    media = r.get("media", {})
+    if media.get("enabled"):
+        fr = media["frames"]
+        lines.append(f"media: {sum(fr.values())} frames (train {fr['train']}, val {fr['val']}, "
+                     f"test {fr['test']}), {sec.get('media', 0):.2f} s, "
+                     f"{media['crops_per_second']:,.0f} crops/s, "
+                     f"{len(media['bad'])} bad media files left out")
+        for path, why in media["bad"][:20]:
+            lines.append(f"  left out {path}: {why}")
     for rec, why in r["skipped"][:20]:
         lines.append(f"  skipped {rec}: {why}")
     if len(r["skipped"]) > 20:
@@ -266,6 +304,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
     p.add_argument("--compress", action="store_true",
                    help="shuffle+deflate the large target arrays (smaller, slower to read)")
+    p.add_argument("--no-media", action="store_true",
+                   help="skip the media: no crops, masks or joint visibility, no MP4/APNG opened")
+    p.add_argument("--crop-size", type=int, default=128, metavar="S",
+                   help="side of the square pedestrian crops (RGB and class-tag mask) in pixels")
+    p.add_argument("--skip-bad-media", action="store_true",
+                   help="leave out recordings whose MP4 or APNG is missing or broken (listed in "
+                        "the summary) instead of failing")
     p.add_argument("--verify", action="store_true",
                    help="check relative/component/world columns agree (mm) and pose.camera "
                         "matches the projection of pose.world (px), per recording")
@@ -283,7 +328,9 @@ def main(argv=None) -> int:
                          benchmark=args.benchmark, val_frac=args.val_frac,
                          test_frac=args.test_frac, seed=args.seed, balance=args.balance,
                          threads=args.threads, verify=args.verify, compress=args.compress,
-                         force=args.force, progress=not args.quiet)
+                         media=not args.no_media, crop_size=args.crop_size,
+                         skip_bad_media=args.skip_bad_media, force=args.force,
+                         progress=not args.quiet)
     except FileExistsError as exc:
         print(f"bsp-convert: {exc}", file=sys.stderr)
         return 3

@@ -1,4 +1,8 @@
-"""bsp-convert end to end on tiny hand-built datasets, read back with h5py in-process."""
+"""bsp-convert end to end on tiny hand-built datasets, read back with h5py in-process.
+
+These datasets have no MP4/APNG files, so they convert with media=False (--no-media);
+the media conversion is tested in test_convert_media.py.
+"""
 import os
 import subprocess
 import sys
@@ -43,7 +47,7 @@ def read_all(path):
 
 def test_round_trip_values(ds, tmp_path):
     out = tmp_path / "clips.h5"
-    rep = cv.convert(ds, out, clip_length=10, val_frac=0.2, test_frac=0.2)
+    rep = cv.convert(ds, out, clip_length=10, val_frac=0.2, test_frac=0.2, media=False)
     # recording A: segments of 40 and 30 frames -> 4 + 3 clips; others 3 clips each = 22
     assert sum(rep["splits"][s]["clips"] for s in ("train", "val", "test")) == 22
     assert rep["rows"] == 70 + 5 * 35 and rep["recordings"] == 6
@@ -78,7 +82,7 @@ def test_round_trip_values(ds, tmp_path):
 
 
 def test_every_recording_in_one_split_and_class_counts(ds, tmp_path):
-    d = read_all(cv.convert(ds, tmp_path / "a.h5", clip_length=10)["output"])
+    d = read_all(cv.convert(ds, tmp_path / "a.h5", clip_length=10, media=False)["output"])
     owners = {}
     for split in ("train", "val", "test"):
         for v in set(d[f"{split}/meta/video_id"]):
@@ -89,9 +93,9 @@ def test_every_recording_in_one_split_and_class_counts(ds, tmp_path):
 
 
 def test_deterministic_over_threads_and_seed(ds, tmp_path):
-    a = read_all(cv.convert(ds, tmp_path / "a.h5", clip_length=10, threads=1)["output"])
-    b = read_all(cv.convert(ds, tmp_path / "b.h5", clip_length=10, threads=2)["output"])
-    c = read_all(cv.convert(ds, tmp_path / "c.h5", clip_length=10, seed=5)["output"])
+    a = read_all(cv.convert(ds, tmp_path / "a.h5", clip_length=10, threads=1, media=False)["output"])
+    b = read_all(cv.convert(ds, tmp_path / "b.h5", clip_length=10, threads=2, media=False)["output"])
+    c = read_all(cv.convert(ds, tmp_path / "c.h5", clip_length=10, seed=5, media=False)["output"])
     for k in a:
         if k != "attrs":
             np.testing.assert_array_equal(a[k], b[k], err_msg=k)
@@ -104,8 +108,8 @@ def test_crossing_column_names_reordered_columns_and_crlf(tmp_path):
     cols = COLUMNS[::-1]
     other = write_dataset(tmp_path / "other", rows, columns=cols, newline="\r\n",
                           crossing_name="frame.pedestrian.is_on_driving_lane")
-    a = read_all(cv.convert(base, tmp_path / "a.h5", clip_length=10, val_frac=0, test_frac=0)["output"])
-    b = read_all(cv.convert(other, tmp_path / "b.h5", clip_length=10, val_frac=0, test_frac=0)["output"])
+    a = read_all(cv.convert(base, tmp_path / "a.h5", clip_length=10, val_frac=0, test_frac=0, media=False)["output"])
+    b = read_all(cv.convert(other, tmp_path / "b.h5", clip_length=10, val_frac=0, test_frac=0, media=False)["output"])
     for k in a:
         if k != "attrs":
             np.testing.assert_array_equal(a[k], b[k], err_msg=k)
@@ -120,7 +124,7 @@ def test_nan_joints_and_out_of_image_windows_are_rejected(tmp_path):
                            for j, (u, v) in enumerate(uv)) + "]"
     rows[12]["frame.pedestrian.pose.camera"] = cell
     ds = write_dataset(tmp_path / "ds", rows)
-    rep = cv.convert(ds, tmp_path / "o.h5", clip_length=10, val_frac=0, test_frac=0)
+    rep = cv.convert(ds, tmp_path / "o.h5", clip_length=10, val_frac=0, test_frac=0, media=False)
     # windows 0-9, 10-19 (has the NaN frame), 20-29 -> 2 kept
     assert sum(rep["splits"][s]["clips"] for s in ("train", "val", "test")) == 2
     assert rep["clips_rejected_out_of_image"] == 1
@@ -130,7 +134,7 @@ def test_benchmark_mode_labels_and_offsets(tmp_path):
     rows = recording(U1, range(120), crossing_from=100, seed=4)
     rows += recording("aaaaaaaa-0000-4000-8000-000000000000-0", range(100), seed=5)
     ds = write_dataset(tmp_path / "ds", rows)
-    rep = cv.convert(ds, tmp_path / "o.h5", benchmark=True, val_frac=0, test_frac=0)
+    rep = cv.convert(ds, tmp_path / "o.h5", benchmark=True, val_frac=0, test_frac=0, media=False)
     d = read_all(rep["output"])
     assert d["attrs"]["clip_length"] == 16 and d["attrs"]["clip_stride"] == 6
     assert d["attrs"]["label_rule"] == "video"
@@ -147,11 +151,11 @@ def test_existing_output_kept_without_force(ds, tmp_path):
     out = tmp_path / "o.h5"
     out.write_bytes(b"precious")
     with pytest.raises(FileExistsError, match="--force"):
-        cv.convert(ds, out)
+        cv.convert(ds, out, media=False)
     assert out.read_bytes() == b"precious"
-    assert cv.main([str(ds), str(out), "--quiet"]) == 3
+    assert cv.main(["--no-media", str(ds), str(out), "--quiet"]) == 3
     assert out.read_bytes() == b"precious"
-    assert cv.main([str(ds), str(out), "--quiet", "--force", "--clip-length", "10"]) == 0
+    assert cv.main(["--no-media", str(ds), str(out), "--quiet", "--force", "--clip-length", "10"]) == 0
     assert h5py.is_hdf5(out)
 
 
@@ -161,21 +165,21 @@ def test_bad_csv_errors_name_file_line_column_and_leave_nothing(tmp_path):
     ds = write_dataset(tmp_path / "ds", rows)
     out = tmp_path / "o.h5"
     with pytest.raises(bf.CsvParseError) as e:
-        cv.convert(ds, out)
+        cv.convert(ds, out, media=False)
     msg = str(e.value)
     assert "data.csv" in msg and "7" in msg and "frame.pedestrian.pose.world" in msg
     assert not out.exists() and not list(tmp_path.glob(".o.h5.tmp-*"))
-    assert cv.main([str(ds), str(out), "--quiet"]) == 1
+    assert cv.main(["--no-media", str(ds), str(out), "--quiet"]) == 1
 
 
 def test_missing_column_and_duplicate_rows(tmp_path):
     rows = recording(U1, range(20))
     ds = write_dataset(tmp_path / "ds", rows, columns=[c for c in COLUMNS if c != "frame.pedestrian.pose.relative"])
     with pytest.raises(bf.CsvParseError, match="frame.pedestrian.pose.relative"):
-        cv.convert(ds, tmp_path / "o.h5")
+        cv.convert(ds, tmp_path / "o.h5", media=False)
     dup = write_dataset(tmp_path / "dup", rows + rows[3:4])
     with pytest.raises(bf.CsvParseError, match="(?i)duplicate"):
-        cv.convert(dup, tmp_path / "o.h5")
+        cv.convert(dup, tmp_path / "o.h5", media=False)
 
 
 def test_interrupted_conversion_leaves_no_file(ds, tmp_path, monkeypatch):
@@ -187,14 +191,14 @@ def test_interrupted_conversion_leaves_no_file(ds, tmp_path, monkeypatch):
 
     monkeypatch.setattr(cv._core, "convert_csv", boom)
     with pytest.raises(KeyboardInterrupt):
-        cv.convert(ds, out)
+        cv.convert(ds, out, media=False)
     assert not out.exists() and not list(tmp_path.iterdir())
 
 
 def test_verify_reports_agreement_and_flags_tampering(tmp_path):
     rows = recording(U1, range(20), seed=7)
     ds = write_dataset(tmp_path / "ds", rows)
-    rep = cv.convert(ds, tmp_path / "o.h5", verify=True, clip_length=10)
+    rep = cv.convert(ds, tmp_path / "o.h5", verify=True, clip_length=10, media=False)
     (v,) = rep["verify"]
     assert v["component_mm"] < 0.1 and v["world_mm"] < 0.1 and v["camera_px"] < 0.01
     assert rep["verify_failed"] == []
@@ -203,16 +207,16 @@ def test_verify_reports_agreement_and_flags_tampering(tmp_path):
     rows[4]["frame.pedestrian.pose.component"] = "[" + ", ".join(
         "[" + ", ".join(repr(float(np.float32(x))) for x in j) + "]" for j in comp) + "]"
     bad = write_dataset(tmp_path / "bad", rows)
-    rep = cv.convert(bad, tmp_path / "b.h5", verify=True, clip_length=10)
+    rep = cv.convert(bad, tmp_path / "b.h5", verify=True, clip_length=10, media=False)
     assert 45 < rep["verify"][0]["component_mm"] < 55
     assert len(rep["verify_failed"]) == 1
-    assert cv.main([str(bad), str(tmp_path / "c.h5"), "--verify", "--quiet", "--clip-length", "10"]) == 4
+    assert cv.main(["--no-media", str(bad), str(tmp_path / "c.h5"), "--verify", "--quiet", "--clip-length", "10"]) == 4
 
 
 def test_fov_from_config_yaml(tmp_path):
     ds = write_dataset(tmp_path / "ds", recording(U1, range(20)))
     (ds / "config.yaml").write_text("fov: 70\n")
-    rep = cv.convert(ds, tmp_path / "o.h5", clip_length=10)
+    rep = cv.convert(ds, tmp_path / "o.h5", clip_length=10, media=False)
     assert rep["settings"]["fov"] == 70.0 and rep["settings"]["fov_source"] == "config.yaml"
     with h5py.File(rep["output"]) as f:
         assert f.attrs["fov"] == 70.0
@@ -220,15 +224,15 @@ def test_fov_from_config_yaml(tmp_path):
 
 def test_bad_options_are_value_errors(ds, tmp_path):
     with pytest.raises(ValueError, match="any:F"):
-        cv.convert(ds, tmp_path / "o.h5", label="first")
+        cv.convert(ds, tmp_path / "o.h5", label="first", media=False)
     with pytest.raises(ValueError, match="clip_length"):
-        cv.convert(ds, tmp_path / "o.h5", clip_length=0)
-    assert cv.main([str(ds), str(tmp_path / "o.h5"), "--label", "nope", "--quiet"]) == 2
+        cv.convert(ds, tmp_path / "o.h5", clip_length=0, media=False)
+    assert cv.main(["--no-media", str(ds), str(tmp_path / "o.h5"), "--label", "nope", "--quiet"]) == 2
 
 
 def test_cli_runs_as_a_module(ds, tmp_path):
     out = tmp_path / "o.h5"
-    p = subprocess.run([sys.executable, "-m", "bsp_fast", "convert", str(ds), str(out), "--clip-length", "10"],
+    p = subprocess.run([sys.executable, "-m", "bsp_fast", "convert", str(ds), str(out), "--clip-length", "10", "--no-media"],
                        capture_output=True, text=True, env={**os.environ})
     assert p.returncode == 0, p.stderr
     assert "train" in p.stdout and "rows/s" in p.stdout

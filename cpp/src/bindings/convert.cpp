@@ -28,6 +28,15 @@ py::dict report_dict(const ConvertReport& r) {
                       py::arg("world_mm") = row.world_mm, py::arg("camera_px") = row.camera_px));
   d["verify"] = v;
   d["verify_failed"] = r.verify_failed;
+  py::dict media;
+  media["frames"] = py::dict(py::arg("train") = r.media.frames[0], py::arg("val") = r.media.frames[1],
+                             py::arg("test") = r.media.frames[2]);
+  media["seconds"] = r.media.seconds, media["check_seconds"] = r.media.check_seconds;
+  py::list bad;
+  for (const BadMedia& b : r.media.bad) bad.append(py::make_tuple(b.path, b.reason));
+  media["bad"] = bad;
+  media["passes"] = r.media.passes;
+  d["media"] = media;
   return d;
 }
 
@@ -46,6 +55,12 @@ py::dict convert(const std::string& csv, const std::string& out, ConvertProgress
   o.compression_level = take(d, "compression_level", o.compression_level);
   o.chunk_clips = take(d, "chunk_clips", o.chunk_clips);
   o.source_path = take(d, "source_path", o.source_path);
+  o.media.enabled = take(d, "media", o.media.enabled);
+  o.media.crop_size = take(d, "crop_size", o.media.crop_size);
+  o.media.skip_bad_media = take(d, "skip_bad_media", o.media.skip_bad_media);
+  o.media.rgb_level = take(d, "media_rgb_level", o.media.rgb_level);
+  o.media.mask_level = take(d, "media_mask_level", o.media.mask_level);
+  o.media.chunk_frames = take(d, "media_chunk_frames", o.media.chunk_frames);
   o.extra_attrs = take(d, "extra_attrs", o.extra_attrs);
   no_leftovers(d);
   ConvertReport r;
