@@ -228,7 +228,7 @@ def test_bad_options_and_files(h5file, tmp_path):
         ClipDataset(h5file, "train", "pose_estimation", noise=5.0)
     plain = tmp_path / "plain.h5"
     write_clip_file(plain, clips=(8, 4, 4), clip_length=4)
-    with pytest.raises(ValueError, match="frames/rgb.*not written by bsp-convert"):
+    with pytest.raises(ValueError, match="frames/rgb.*convert with media=True"):
         ClipDataset(plain, "train", "pose_estimation")
     with h5py.File(plain, "a") as f:
         f.attrs["schema_version"] = 2

@@ -50,6 +50,9 @@ def test_benchmark_constructor_uses_the_report_setup(tmp_path):
     assert BSPDataModule.benchmark(tmp_path, clip_offset=8).clip_offset == 8
 
 
+@pytest.mark.filterwarnings("ignore:You passed in a `val_dataloader`")
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")
+@pytest.mark.filterwarnings("ignore::FutureWarning")
 def test_lightning_fit_runs_and_reshuffles_per_epoch(h5file):
     pl = pytest.importorskip("lightning.pytorch")
 
@@ -123,6 +126,32 @@ def test_datamodule_converts_a_synth_sample_on_first_use(synth_sample):
     again.setup()  # second use: the cached file is reused, not reconverted
     assert again.h5_path == dm.h5_path and dm.h5_path.stat().st_mtime_ns == mtime
     assert again.conversion_report is None
+
+
+def test_pose_estimation_on_media_converted_from_a_synth_sample(synth_sample):
+    dm = BSPDataModule(synth_sample, task="pose_estimation", clip_length=8, batch_size=4,
+                       convert_options={"crop_size": 32},
+                       dataset_options={"with_mask": True, "with_pixels": True})
+    assert dm.h5_path.name == "bsp_fast-clips-L8-o8-media.h5"
+    dm.setup("fit")
+    ds = dm.datasets["train"]
+    batch = next(iter(dm.train_dataloader()))
+    assert batch["inputs"].shape == (4, 8, 3, 32, 32) and batch["inputs"].dtype == torch.uint8
+    t, vis = batch["targets"].numpy(), batch["visible"].numpy()
+    assert vis.mean() > 0.5  # most joints of a walking pedestrian are visible
+    inside = (t >= -1) & (t <= 33)
+    assert inside[vis].all()  # visible joints lie in their crop
+    # the crop mask shows the pedestrian (tag 4) at most visible joints
+    mask = batch["mask"].numpy()
+    b, f, j = np.nonzero(vis)
+    u = np.clip(t[b, f, j, 0].astype(int), 0, 31)
+    v = np.clip(t[b, f, j, 1].astype(int), 0, 31)
+    assert (mask[b, f, v, u] == 4).mean() > 0.5
+    box = batch["crop_box"].numpy()
+    px = batch["pixels"].numpy()
+    size = box[..., None, 2:] - box[..., None, :2]
+    np.testing.assert_allclose((px - box[..., None, :2]) * 32 / size, t, rtol=1e-5, atol=1e-3)
+    assert len(ds) > 0
 
 
 def test_two_workers_over_a_converted_synth_sample_yield_each_clip_once(synth_sample, tmp_path):

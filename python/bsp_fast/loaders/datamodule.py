@@ -37,9 +37,10 @@ def _converter():
         return importlib.import_module("bsp_fast.convert").convert
 
 
-def _default_h5(dataset_dir: Path, L: int, offset: int, benchmark: bool, balance: bool) -> Path:
+def _default_h5(dataset_dir: Path, L: int, offset: int, benchmark: bool, balance: bool,
+                media: bool) -> Path:
     tags = f"L{L}-o{offset}" + ("-benchmark" if benchmark else "")
-    tags += "-balanced" if balance else ""
+    tags += ("-balanced" if balance else "") + ("-media" if media else "")
     return Path(dataset_dir) / f"bsp_fast-clips-{tags}.h5"
 
 
@@ -48,13 +49,15 @@ class BSPDataModule(_Base):
 
     Give ``h5_path`` (an existing file, or where to write one), ``dataset_dir`` (a CARLA-BSP
     dataset converted on first use, to ``h5_path`` or by default to
-    ``<dataset_dir>/bsp_fast-clips-L<L>-o<offset>[-benchmark][-balanced].h5``) or both.
+    ``<dataset_dir>/bsp_fast-clips-L<L>-o<offset>[-benchmark][-balanced][-media].h5``) or
+    both.
     ``clip_length``/``clip_offset`` default as in :func:`bsp_fast.convert.convert` (30/L,
     16/6 with ``benchmark``); for an existing file they are checked against its attributes.
     ``balance`` balances the train split (in the converter, and in the dataset for files
     converted without it). ``noise``/``mjp`` deform the 2D inputs (SPEC section 5), train
     ``augment`` adds flips and rotations for the 2D tasks. ``convert_options`` go to
-    :func:`bsp_fast.convert.convert` (e.g. ``fov``, ``label``, ``seed``); other keywords of
+    :func:`bsp_fast.convert` (e.g. ``fov``, ``label``, ``seed``, ``crop_size``; ``media``
+    defaults to True for ``pose_estimation`` only); other keywords of
     :class:`ClipDataset` go in ``dataset_options``.
     """
 
@@ -83,15 +86,18 @@ class BSPDataModule(_Base):
         L = clip_length or (BENCHMARK["clip_length"] if benchmark else 30)
         self.clip_length = L
         self.clip_offset = clip_offset or (BENCHMARK["clip_offset"] if benchmark else L)
+        self.convert_options = dict(convert_options or {})
+        # media crops cost decoding time and space; only pose estimation reads them
+        self.convert_options.setdefault("media", task == "pose_estimation")
         self.h5_path = Path(h5_path) if h5_path is not None else _default_h5(
-            self.dataset_dir, L, self.clip_offset, self.benchmark_windows, self.balance)
+            self.dataset_dir, L, self.clip_offset, self.benchmark_windows, self.balance,
+            bool(self.convert_options["media"]))
         self.noise, self.mjp, self.augment = noise, mjp, bool(augment)
         self.batch_size, self.num_workers = batch_size, num_workers
         self.seed, self.eval_seed, self.sampler_seed = seed, eval_seed, sampler_seed
         self.block_size, self.pin_memory = block_size, bool(pin_memory)
         self.persistent_workers = (num_workers > 0 if persistent_workers is None
                                    else bool(persistent_workers))
-        self.convert_options = dict(convert_options or {})
         self.dataset_options = dict(dataset_options or {})
         self.datasets: dict = {}
         self.conversion_report = None

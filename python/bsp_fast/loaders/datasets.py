@@ -143,7 +143,7 @@ class ClipDataset(torch.utils.data.Dataset):
             g = f[self.split]
             missing = [n for n in self._required() if n not in g]
             if missing:
-                hint = (" (media frames are not written by bsp-convert yet)"
+                hint = (" (convert with media=True, i.e. without --no-media)"
                         if any(n in _MEDIA for n in missing) else "")
                 raise ValueError(f"{self.h5_path}: /{self.split} lacks {missing} needed by task "
                                  f"{self.task!r}{hint}")
