@@ -125,6 +125,8 @@ void root_attrs(const h5::Group& g, const ConvertOptions& o, const ConvertReport
   g.attr("source_crc32", static_cast<std::int64_t>(r.source_crc32));
   g.attr("source_bytes", static_cast<std::int64_t>(r.source_bytes));
   media_attrs(g, o.media);
+  if (o.media.enabled)
+    g.attr("media_recordings_left_out", static_cast<std::int64_t>(r.media.bad.size()));
   for (const auto& [k, v] : o.extra_attrs) g.attr(k, v);
   for (int s = 0; s < 3; ++s) {
     g.attr(std::string("class_counts_") + kSplitNames[s],
@@ -265,6 +267,18 @@ std::vector<detail::MediaFailure> plan_media(const PoseTable& table, const Plan&
   return failed;
 }
 
+void verify(const PoseTable& table, const Plan& plan, const ConvertOptions& opt,
+            ConvertReport& report, ConvertProgress* progress) {
+  if (progress) progress->stage = 2;
+  const auto t0 = Clock::now();
+  report.verify = detail::verify_recordings(table, plan, opt.fov, opt.threads);
+  for (const VerifyRow& v : report.verify)
+    if (!(v.component_mm <= opt.verify_tol_mm && v.world_mm <= opt.verify_world_tol_mm &&
+          v.camera_px <= opt.verify_tol_px))
+      report.verify_failed.push_back(v.recording);
+  report.seconds["verify"] = since(t0);
+}
+
 }  // namespace
 
 ConvertReport convert_csv(const std::string& csv_path, const std::string& out_path,
@@ -284,7 +298,7 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
   std::set<RecordingKey> excluded;
   std::vector<BadMedia> bad;
   double check_seconds = 0;
-  for (int pass = 1;; ++pass) {
+  for (int writes = 1;;) {
     ConvertReport report = base;
     t0 = Clock::now();
     const Plan plan = plan_excluding(table, opt.clips, excluded);
@@ -300,27 +314,19 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
         continue;
       }
     }
-    if (opt.verify) {
-      if (progress) progress->stage = 2;
-      t0 = Clock::now();
-      report.verify = detail::verify_recordings(table, plan, opt.fov, opt.threads);
-      for (const VerifyRow& v : report.verify)
-        if (!(v.component_mm <= opt.verify_tol_mm && v.world_mm <= opt.verify_world_tol_mm &&
-              v.camera_px <= opt.verify_tol_px))
-          report.verify_failed.push_back(v.recording);
-      report.seconds["verify"] = since(t0);
-    }
+    if (opt.verify) verify(table, plan, opt, report, progress);
+    report.media.bad = bad;
     auto failed = write_output(out_path, table, plan, opt.media.enabled ? &media : nullptr, opt,
                                report, progress);
     if (!failed.empty()) {
       exclude(plan, failed, excluded, bad);
+      ++writes;
       continue;
     }
     for (int s = 0; s < 3; ++s) report.media.frames[s] = media.tables[s].frames();
     report.media.check_seconds = check_seconds;
     report.media.seconds = check_seconds + (opt.media.enabled ? report.seconds["media"] : 0.0);
-    report.media.bad = std::move(bad);
-    report.media.passes = pass;
+    report.media.passes = writes;
     if (progress) progress->stage = 4;
     return report;
   }

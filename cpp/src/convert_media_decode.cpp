@@ -48,7 +48,7 @@ void segmentation_pass(const PoseTable& t, const std::size_t* rows, const std::s
 
 // RGB crops: each frame's crop box clipped to the picture is all that gets converted.
 void video_pass(const PoseTable& t, const std::size_t* rows, VideoReader& video, int S,
-                MediaBlock& b) {
+                MediaBlock& b, ConvertProgress* progress) {
   const int W = video.width(), H = video.height();
   std::vector<std::uint8_t> roi;
   for (std::size_t i = 0; i < b.frames; ++i) {
@@ -59,11 +59,13 @@ void video_pass(const PoseTable& t, const std::size_t* rows, VideoReader& video,
     std::uint8_t* out = b.at<std::uint8_t>(kColRgb, i);
     if (x1 <= x0 || y1 <= y0) {  // the crop misses the picture: nothing to decode
       crop_resize(nullptr, 0, 0, 0, 0, 3, box, S, false, out);
+      if (progress) ++progress->done;
       continue;
     }
     roi.resize(static_cast<std::size_t>(x1 - x0) * (y1 - y0) * 3);
     video.read({t.frame_idx[rows[i]]}, roi.data(), Crop{x0, y0, x1 - x0, y1 - y0});
     crop_resize(roi.data(), x0, y0, x1 - x0, y1 - y0, 3, box, S, false, out);
+    if (progress) ++progress->done;
   }
 }
 
@@ -82,7 +84,7 @@ std::vector<FrameColumn> frame_columns(int crop_size) {
 }
 
 MediaBlock decode_block(const PoseTable& t, const FrameTable& table, std::size_t block,
-                        const MediaFiles& files, int crop_size) {
+                        const MediaFiles& files, int crop_size, ConvertProgress* progress) {
   const std::size_t first = table.begin[block];
   MediaBlock b = make_block(table.begin[block + 1] - first, crop_size);
   b.failure.recording = table.recordings[block];
@@ -94,7 +96,7 @@ MediaBlock decode_block(const PoseTable& t, const FrameTable& table, std::size_t
     ApngReader seg(files.segmentation);
     segmentation_pass(t, rows, files.segmentation, seg, video.fps(), crop_size, b);
     b.failure.path = files.video;
-    video_pass(t, rows, video, crop_size, b);
+    video_pass(t, rows, video, crop_size, b, progress);
   } catch (const std::exception& e) {
     b.failure.reason = e.what();
     b.failure.error = std::current_exception();

@@ -73,10 +73,12 @@ class FrameTableWriter {
     for (FrameColumn& c : frame_columns(o.crop_size)) {
       Column col;
       col.spec = std::move(c);
-      const bool big = col.spec.name == "frames/rgb" || col.spec.name == "frames/mask";
-      col.chunk = std::max<hsize_t>(1, big ? static_cast<hsize_t>(o.chunk_frames) : kSmallChunk);
-      const int level = col.spec.name == "frames/rgb" ? o.rgb_level
-                        : col.spec.name == "frames/mask" ? o.mask_level : 0;
+      const bool rgb = col.spec.name == "frames/rgb", mask = col.spec.name == "frames/mask";
+      const int level = rgb ? o.rgb_level : mask ? o.mask_level : 0;
+      // Deflated RGB goes in one-frame chunks: a random clip then inflates only its frames.
+      col.chunk = rgb && level > 0 ? 1
+                  : rgb || mask    ? static_cast<hsize_t>(std::max(o.chunk_frames, 1))
+                                   : kSmallChunk;
       col.shape = {frames};
       col.shape.insert(col.shape.end(), col.spec.tail.begin(), col.spec.tail.end());
       col.ds = g.create_dataset(col.spec.name, col.spec.type, col.shape, col.chunk,
@@ -167,7 +169,7 @@ std::vector<MediaFailure> write_media(const std::array<const h5::Group*, 3>& gro
     const FrameTable& ft = tables[static_cast<std::size_t>(blocks[i].first)];
     const std::size_t b = blocks[i].second;
     try {
-      return decode_block(t, ft, b, files[ft.recordings[b]], S);
+      return decode_block(t, ft, b, files[ft.recordings[b]], S, progress);
     } catch (...) {  // e.g. bad_alloc before decoding started
       MediaBlock failed;
       failed.failure.recording = ft.recordings[b];
@@ -192,7 +194,6 @@ std::vector<MediaFailure> write_media(const std::array<const h5::Group*, 3>& gro
     } else if (auto& w = writers[static_cast<std::size_t>(blocks[i].first)]) {
       w->append(block);
     }
-    if (progress) progress->done += block.frames;
   }
   for (auto& w : writers)
     if (w) w->finish();

@@ -26,12 +26,41 @@ from pathlib import Path
 
 from ._native import core as _core
 
-__all__ = ["convert", "main", "format_report", "DEFAULTS"]
+__all__ = ["convert", "main", "format_report", "frame_media", "crop_resize", "DEFAULTS"]
 
 DEFAULTS = dict(clip_length=30, benchmark_clip_length=16, benchmark_clip_offset=6,
                 val_frac=0.2, test_frac=0.2, seed=22742, fov=90.0)
 _STAGES = ("reading data.csv", "planning clips", "verifying poses", "writing clips", "done",
            "checking media files", "cropping media frames")
+
+
+def frame_media(tags, uv) -> dict:
+    """The per-frame media values bsp-convert stores, for one segmentation frame.
+
+    ``tags``: (H, W) uint8 class tags (tag 4 = pedestrian); ``uv``: (26, 2) projected
+    joints in pixels. Returns ``crop_box`` (4,) float32 ``[u0, v0, u1, v1]`` (a square with
+    integer edges, possibly past the image), ``mask_bbox`` (4,) int32 ``[u0, v0, u1, v1)``
+    or all -1, ``visible_pixels`` (tag-4 pixel count) and ``joint_visible`` (26,) uint8.
+    """
+    import numpy as np
+
+    tags = np.asarray(tags)
+    if tags.dtype != np.uint8 or tags.ndim != 2:
+        raise ValueError(f"tags must be an (H, W) uint8 array, got {tags.dtype} {tags.shape}")
+    return _core.frame_media(tags, np.asarray(uv, np.float32))
+
+
+def crop_resize(image, box, size: int, nearest: bool = False):
+    """Cuts ``box`` (``crop_box`` of :func:`frame_media`) out of an (H, W[, C]) uint8 image,
+    zero-padding what lies outside, and resizes it to ``size`` x ``size`` the way
+    bsp-convert does (OpenCV INTER_AREA for pictures, INTER_NEAREST for class tags)."""
+    import numpy as np
+
+    image = np.asarray(image)
+    if image.dtype != np.uint8:
+        raise ValueError(f"image must be uint8, got {image.dtype}")
+    _positive("size", size, allow_none=False)
+    return _core.crop_resize(image, np.asarray(box, np.float32), int(size), bool(nearest))
 
 
 def _dataset_csv(dataset) -> tuple[Path, Path]:
@@ -104,7 +133,8 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
     file fails the conversion naming the file, unless ``skip_bad_media``: then its
     recording is left out (the split is planned without it) and listed in
     ``report["media"]["bad"]``. Media paths in data.csv that are absolute or leave the
-    dataset root (``..``) are refused before anything is opened.
+    dataset root (``..``) are refused before anything is opened. ``compress`` deflates the
+    large pose targets and the RGB crops (about 2.5x smaller, much slower random reads).
 
     Returns the report: rows, recordings, clips per split and class, skipped recordings
     and why, seconds per stage, ``media`` (frames per split, seconds, crops_per_second,
@@ -303,7 +333,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="balance the train split's classes (keep min class count of each)")
     p.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
     p.add_argument("--compress", action="store_true",
-                   help="shuffle+deflate the large target arrays (smaller, slower to read)")
+                   help="shuffle+deflate the large target arrays and the RGB crops (smaller, "
+                        "slower to read); the masks are always deflated")
     p.add_argument("--no-media", action="store_true",
                    help="skip the media: no crops, masks or joint visibility, no MP4/APNG opened")
     p.add_argument("--crop-size", type=int, default=128, metavar="S",

@@ -17,9 +17,12 @@ struct MediaOptions {
   bool enabled = true;
   int crop_size = 128;          // S: crops are S x S
   bool skip_bad_media = false;  // leave out recordings whose media is missing or broken
-  int rgb_level = 0;            // deflate level of frames/rgb (0 = uncompressed)
-  int mask_level = 1;           // deflate level of frames/mask (0 = uncompressed)
-  int chunk_frames = 64;        // frames per HDF5 chunk of the frame table
+  // Measured in benchmarks/bench_convert_media.py (docs/hdf5-schema.md): masks shrink ~20x
+  // with deflate 1 and still read at ~30k frames/s; RGB crops only ~2.5x, and deflated
+  // RGB reads 15-30x slower, so it is opt-in (ConvertOptions::compress).
+  int rgb_level = 0;            // deflate level of frames/rgb (0 = none); chunks of 1 frame
+  int mask_level = 1;           // deflate level of frames/mask (0 = none)
+  int chunk_frames = 16;        // frames per chunk of frames/mask and uncompressed frames/rgb
 };
 
 struct ConvertOptions {
@@ -59,7 +62,7 @@ struct MediaReport {
   double seconds = 0;                   // checking, decoding, cropping and writing
   double check_seconds = 0;             // opening every file before decoding
   std::vector<BadMedia> bad;            // left out with skip_bad_media
-  int passes = 0;                       // > 1 when a file failed mid-decode (skip_bad_media)
+  int passes = 0;  // times the file was written: > 1 when a file failed mid-decode (skipped)
 };
 
 struct ConvertReport {

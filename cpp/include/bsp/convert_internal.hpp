@@ -83,8 +83,9 @@ struct MediaBlock {
 };
 // Decodes block `block` of `table`: the APNG frames first (statistics, crop boxes, masks),
 // then only the crop region of each video frame. Errors are caught into block.failure.
+// Counts finished frames in progress->done.
 MediaBlock decode_block(const PoseTable& t, const FrameTable& table, std::size_t block,
-                        const MediaFiles& files, int crop_size);
+                        const MediaFiles& files, int crop_size, ConvertProgress* progress);
 
 // Decodes and crops the frame tables of the three splits and writes frames/* and
 // clip_frames into each group (nullptr: decode only, to find failures). Without

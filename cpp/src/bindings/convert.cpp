@@ -58,7 +58,8 @@ py::dict convert(const std::string& csv, const std::string& out, ConvertProgress
   o.media.enabled = take(d, "media", o.media.enabled);
   o.media.crop_size = take(d, "crop_size", o.media.crop_size);
   o.media.skip_bad_media = take(d, "skip_bad_media", o.media.skip_bad_media);
-  o.media.rgb_level = take(d, "media_rgb_level", o.media.rgb_level);
+  // --compress covers the RGB crops too unless a level is given.
+  o.media.rgb_level = take(d, "media_rgb_level", o.compress ? o.compression_level : o.media.rgb_level);
   o.media.mask_level = take(d, "media_mask_level", o.media.mask_level);
   o.media.chunk_frames = take(d, "media_chunk_frames", o.media.chunk_frames);
   o.extra_attrs = take(d, "extra_attrs", o.extra_attrs);
@@ -69,6 +70,41 @@ py::dict convert(const std::string& csv, const std::string& out, ConvertProgress
     r = convert_csv(csv, out, o, progress);
   }
   return report_dict(r);
+}
+
+py::dict frame_media_py(const CArray<std::uint8_t>& tags, const CArray<float>& uv) {
+  if (tags.ndim() != 2) throw py::value_error("tags must be (H, W) class tags, got " + shape_str(tags));
+  if (leading_count(uv, {26, 2}, "uv", "(26, 2)") != 1)
+    throw py::value_error("uv must be one frame's (26, 2) joints, got " + shape_str(uv));
+  const FrameMedia m = frame_media(tags.data(), static_cast<int>(tags.shape(1)),
+                                   static_cast<int>(tags.shape(0)), uv.data());
+  auto box = empty<float>({4});
+  auto bbox = empty<std::int32_t>({4});
+  auto vis = empty<std::uint8_t>({26});
+  std::copy(m.crop_box.begin(), m.crop_box.end(), box.mutable_data());
+  std::copy(m.mask_bbox.begin(), m.mask_bbox.end(), bbox.mutable_data());
+  std::copy(m.joint_visible.begin(), m.joint_visible.end(), vis.mutable_data());
+  py::dict d;
+  d["crop_box"] = box, d["mask_bbox"] = bbox, d["visible_pixels"] = m.visible_pixels;
+  d["joint_visible"] = vis;
+  return d;
+}
+
+py::array crop_resize_py(const CArray<std::uint8_t>& image, const CArray<float>& box, int size,
+                         bool nearest) {
+  if (image.ndim() != 2 && image.ndim() != 3)
+    throw py::value_error("image must be (H, W) or (H, W, C), got " + shape_str(image));
+  const int channels = image.ndim() == 3 ? static_cast<int>(image.shape(2)) : 1;
+  if (channels < 1 || channels > 4) throw py::value_error("image must have 1 to 4 channels");
+  if (box.ndim() != 1 || box.shape(0) != 4) throw py::value_error("box must be [u0, v0, u1, v1]");
+  if (size < 1) throw py::value_error("size must be positive");
+  std::vector<py::ssize_t> shape = {size, size};
+  if (image.ndim() == 3) shape.push_back(channels);
+  auto out = empty<std::uint8_t>(shape);
+  const std::array<float, 4> b = {box.data()[0], box.data()[1], box.data()[2], box.data()[3]};
+  crop_resize(image.data(), 0, 0, static_cast<int>(image.shape(1)), static_cast<int>(image.shape(0)),
+              channels, b, size, nearest, out.mutable_data());
+  return out;
 }
 
 }  // namespace
@@ -86,4 +122,11 @@ BSP_BINDING(convert) {
   m.def("convert_csv", &convert, py::arg("csv_path"), py::arg("out_path"),
         py::arg("progress") = nullptr,
         "Converts data.csv into an HDF5 file of train/val/test clips; returns the report.");
+  m.def("frame_media", &frame_media_py, py::arg("tags"), py::arg("uv"),
+        "Pedestrian statistics of one (H, W) segmentation frame with its (26, 2) joints: "
+        "crop_box, mask_bbox, visible_pixels, joint_visible (as bsp-convert stores them).");
+  m.def("crop_resize", &crop_resize_py, py::arg("image"), py::arg("box"), py::arg("size"),
+        py::arg("nearest") = false,
+        "Cuts the integer square box [u0, v0, u1, v1] out of an (H, W[, C]) uint8 image with "
+        "zero padding and resizes it to size x size (INTER_AREA, or INTER_NEAREST for tags).");
 }
