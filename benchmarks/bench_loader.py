@@ -19,8 +19,10 @@ for classification and autoencoder.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
+import resource
 import sys
 import tempfile
 import time
@@ -84,18 +86,29 @@ class NaiveClips(torch.utils.data.Dataset):
         return out
 
 
-def _rate(loader, limit: int) -> float:
-    """Clips per second after the first batch (worker start-up excluded), up to ``limit``."""
+def _cpu() -> float:
+    """CPU seconds of this process and of its exited children (the DataLoader workers)."""
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def _rate(loader, limit: int) -> tuple:
+    """(clips/s after the first batch, i.e. worker start-up excluded, up to ``limit``;
+    CPU seconds per clip of all processes over the whole run, start-up included)."""
+    c0 = _cpu()
     it = iter(loader)
-    next(it)
+    batch = next(it)
+    total = len(batch["label"])
     n, t0 = 0, time.perf_counter()
     for batch in it:
         n += len(batch["label"])
         if n >= limit:
             break
-    if n == 0:
-        raise ValueError("one batch only: use more clips or a smaller batch size")
-    return n / (time.perf_counter() - t0)
+    rate = n / (time.perf_counter() - t0) if n else float("nan")
+    total += n
+    del it, batch  # non-persistent workers exit here, so their CPU time is counted
+    gc.collect()
+    return rate, (_cpu() - c0) / total
 
 
 def _batch(task, args) -> int:
@@ -105,13 +118,13 @@ def _batch(task, args) -> int:
 def _fast(path, task, workers, args):
     kw = dict(noise=args.noise, mjp=args.mjp) if task != "pose_estimation" else {}
     ds = ClipDataset(path, "train", task, **kw)
-    return ds.loader(_batch(task, args), num_workers=workers)
+    return ds.loader(_batch(task, args), num_workers=workers, persistent_workers=False)
 
 
 def _naive(path, task, workers, args):
     ds = NaiveClips(path, "train", task, args.noise, args.mjp)
     return torch.utils.data.DataLoader(ds, batch_size=_batch(task, args), shuffle=True,
-                                       num_workers=workers, persistent_workers=workers > 0)
+                                       num_workers=workers)
 
 
 def _files(args, tmp):
@@ -141,14 +154,16 @@ def run(args) -> list:
             for workers in args.workers:
                 limit = args.limit if task != "pose_estimation" else args.pose_clips
                 # best of --repeat runs: the machine may be shared, contention only slows
-                fast = max(_rate(_fast(path, task, workers, args), limit)
-                           for _ in range(args.repeat))
-                naive = max(_rate(_naive(path, task, workers, args), min(limit, args.naive_limit))
-                            for _ in range(args.repeat))
+                fast, cpu = max(_rate(_fast(path, task, workers, args), limit)
+                                for _ in range(args.repeat))
+                naive, ncpu = max(_rate(_naive(path, task, workers, args),
+                                        min(limit, args.naive_limit)) for _ in range(args.repeat))
                 rows.append(dict(task=task, workers=workers, clips_per_s=fast,
-                                 naive_clips_per_s=naive, speedup=fast / naive))
+                                 naive_clips_per_s=naive, speedup=fast / naive,
+                                 cpu_us_per_clip=cpu * 1e6, naive_cpu_us_per_clip=ncpu * 1e6))
                 print(f"{task:16s} workers={workers}: {fast:10,.0f} clips/s  naive "
-                      f"{naive:8,.0f} clips/s  x{fast / naive:.1f}", file=sys.stderr)
+                      f"{naive:8,.0f} clips/s  x{fast / naive:.1f}  CPU/clip {cpu * 1e6:.0f} us "
+                      f"(naive {ncpu * 1e6:.0f} us)", file=sys.stderr)
     return rows
 
 
@@ -157,11 +172,12 @@ def table(rows, args) -> str:
            f"{args.pose_batch_size}, {args.crop_size}x{args.crop_size} crops), train split, noise "
            f"{args.noise} px, MJP {args.mjp}, {os.cpu_count()} cores, torch {torch.__version__}, "
            f"best of {args.repeat}, load average {os.getloadavg()[0]:.1f} at the end",
-           "", "| task | workers | ClipDataset clips/s | naive h5py clips/s | speed-up |",
-           "|---|---|---|---|---|"]
+           "", "| task | workers | ClipDataset clips/s | naive h5py clips/s | speed-up | "
+           "CPU us/clip (naive) |", "|---|---|---|---|---|---|"]
     for r in rows:
         out.append(f"| {r['task']} | {r['workers']} | {r['clips_per_s']:,.0f} | "
-                   f"{r['naive_clips_per_s']:,.0f} | {r['speedup']:.1f}x |")
+                   f"{r['naive_clips_per_s']:,.0f} | {r['speedup']:.1f}x | "
+                   f"{r['cpu_us_per_clip']:.0f} ({r['naive_cpu_us_per_clip']:.0f}) |")
     return "\n".join(out)
 
 

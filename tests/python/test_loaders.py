@@ -264,3 +264,40 @@ def test_balancing_a_split_without_one_class_leaves_it_empty(h5file):
     with pytest.warns(UserWarning, match="balancing leaves no clip"):
         ds = ClipDataset(h5file, "train", "classification", indices=rows, balance=True)
     assert len(ds) == 0 and list(ds.loader(4)) == []
+
+
+def test_worker_ring_buffers_are_reused_across_many_batches(h5file):
+    from bsp_fast.loaders import transport
+
+    ds = ClipDataset(h5file, "val", "autoencoder", noise=5.0, mjp=0.2)
+    loader = ds.loader(batch_size=1, num_workers=2)  # 12 batches per worker > RING_SLOTS
+    for _ in range(2):
+        for batch in loader:
+            ref = ds.__getitems__(batch["meta"]["index"].tolist())
+            assert all(torch.equal(batch[k], ref[k]) for k in ref if k != "meta")
+    assert 0 < len(transport._mapped) <= 2 * transport.RING_SLOTS
+
+
+def test_packing_in_process_ring_and_one_off_buffers(monkeypatch):
+    import pickle
+    from multiprocessing.reduction import ForkingPickler
+
+    from bsp_fast.loaders import transport
+
+    monkeypatch.setattr(transport, "_ring", [])
+    monkeypatch.setattr(transport, "_mapped", {})
+    arrays = {"x": np.arange(12, dtype=np.float32).reshape(3, 4), "m": np.array([True, False])}
+    packed = [transport.pack_batch(arrays, {"i": np.arange(3)}, {"s": ["a", "b", "c"]})
+              for _ in range(transport.RING_SLOTS + 2)]
+    keys = [p.slot[2] for p in packed]
+    assert all(k is not None for k in keys[:transport.RING_SLOTS])
+    assert keys[transport.RING_SLOTS:] == [None, None]  # every ring slot in flight
+    batches = [pickle.loads(ForkingPickler.dumps(p)) for p in packed]
+    for b in batches:
+        np.testing.assert_array_equal(b["x"].numpy(), arrays["x"])
+        assert b["m"].dtype == torch.bool and b["m"].tolist() == [True, False]
+        assert b["meta"]["i"].tolist() == [0, 1, 2] and b["meta"]["s"] == ["a", "b", "c"]
+    again = transport.pack_batch(arrays, {}, {})  # received batches freed their slots
+    assert again.slot[2] == keys[0] and again.slot[3]  # reused; sent as a key only
+    b = pickle.loads(ForkingPickler.dumps(again))
+    np.testing.assert_array_equal(b["x"].numpy(), arrays["x"])

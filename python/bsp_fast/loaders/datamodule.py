@@ -66,7 +66,7 @@ class BSPDataModule(_Base):
                  benchmark: bool = False, balance: bool = False, noise: float = 0.0, mjp=0.0,
                  batch_size: int = 256, num_workers: int = 0, *, augment: bool = True,
                  seed: int | None = None, eval_seed: int = DEFAULT_EVAL_SEED,
-                 sampler_seed: int | None = None, block_size: int = 16, pin_memory: bool = False,
+                 sampler_seed: int | None = None, block_size: int = 32, pin_memory: bool = False,
                  persistent_workers: bool | None = None, convert_options: dict | None = None,
                  dataset_options: dict | None = None):
         super().__init__()
@@ -75,9 +75,8 @@ class BSPDataModule(_Base):
         if dataset_dir is None and h5_path is None:
             raise ValueError("BSPDataModule needs dataset_dir (converted on first use), h5_path, "
                              "or both")
-        for name, v in (("batch_size", batch_size),):
-            if not isinstance(v, int) or isinstance(v, bool) or v <= 0:
-                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if not isinstance(batch_size, int) or isinstance(batch_size, bool) or batch_size <= 0:
+            raise ValueError(f"batch_size must be a positive integer, got {batch_size!r}")
         if not isinstance(num_workers, int) or num_workers < 0:
             raise ValueError(f"num_workers must be an integer >= 0, got {num_workers!r}")
         self.dataset_dir = None if dataset_dir is None else Path(dataset_dir)

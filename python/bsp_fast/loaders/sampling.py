@@ -14,7 +14,7 @@ import math
 import numpy as np
 import torch.utils.data
 
-__all__ = ["IndexBatch", "ContiguousBatchSampler", "collate_batch", "pack_batch"]
+__all__ = ["IndexBatch", "ContiguousBatchSampler", "collate_batch"]
 
 
 class IndexBatch(list):
@@ -27,56 +27,6 @@ class IndexBatch(list):
 
     def __reduce__(self):
         return (IndexBatch, (list(self), self.epoch))
-
-
-def _unpack_batch(buffer, layout: dict, strings: dict) -> dict:
-    """Rebuilds a packed batch in the receiving process: tensor views of one buffer."""
-    batch: dict = {"meta": dict(strings)}
-    for key, (offset, nbytes, dtype, shape) in layout.items():
-        t = buffer[offset:offset + nbytes].view(getattr(torch, dtype)).view(shape)
-        if key.startswith("meta/"):
-            batch["meta"][key[5:]] = t
-        else:
-            batch[key] = t
-    return batch
-
-
-class _PackedBatch:
-    """A batch on its way out of a DataLoader worker. Every array travels in ONE shared-
-    memory buffer: torch sends each tensor's storage as its own file descriptor, which costs
-    the main process ~0.25 ms per tensor (15 per batch), more than reading the batch.
-    Unpickling returns a plain dict of tensors (views of the buffer)."""
-
-    def __init__(self, buffer, layout: dict, strings: dict):
-        self.buffer, self.layout, self.strings = buffer, layout, strings
-
-    def __reduce__(self):
-        return (_unpack_batch, (self.buffer, self.layout, self.strings))
-
-
-def _shared_bytes(n: int):
-    try:  # allocated in shared memory at once: no copy when the batch is sent
-        return torch.empty(0, dtype=torch.uint8).set_(torch.UntypedStorage._new_shared(n))
-    except (AttributeError, RuntimeError):  # pragma: no cover - other torch versions
-        return torch.empty(n, dtype=torch.uint8)
-
-
-def pack_batch(arrays: dict, meta: dict, strings: dict) -> _PackedBatch:
-    """Packs NumPy ``arrays`` and ``meta`` arrays (and ``meta`` string lists) for sending
-    from a worker; the main process receives ``{**arrays, "meta": {**meta, **strings}}``
-    as torch tensors."""
-    items = list(arrays.items()) + [(f"meta/{k}", v) for k, v in meta.items()]
-    layout, total = {}, 0
-    for key, a in items:
-        dtype = "bool" if a.dtype == np.bool_ else str(a.dtype)
-        layout[key] = (total, a.nbytes, dtype, tuple(a.shape))
-        total += -(-a.nbytes // 64) * 64  # 64-byte aligned views
-    buffer = _shared_bytes(max(total, 1))
-    raw = buffer.numpy()
-    for key, a in items:
-        offset, nbytes, _, shape = layout[key]
-        raw[offset:offset + nbytes].view(a.dtype).reshape(shape)[...] = a
-    return _PackedBatch(buffer, layout, strings)
 
 
 def collate_batch(batch):
@@ -95,7 +45,7 @@ class ContiguousBatchSampler(torch.utils.data.Sampler):
     """
 
     def __init__(self, num_items: int, batch_size: int, shuffle: bool = False,
-                 block_size: int = 16, drop_last: bool = False, seed: int | None = None):
+                 block_size: int = 32, drop_last: bool = False, seed: int | None = None):
         for name, v in (("batch_size", batch_size), ("block_size", block_size)):
             if not isinstance(v, int) or isinstance(v, bool) or v <= 0:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
