@@ -64,6 +64,14 @@ struct Lines {
   bool last_unterminated = false;    // the file does not end with a line end
 };
 
+// Drops the mapped pages wholly inside [from, to) of the file mapping at `base` from this
+// process (MADV_DONTNEED). The file is read-only and mapped privately, so a later access
+// simply faults the page back in from the page cache: this only keeps the resident set of
+// a multi-GB data.csv from growing to the file's size. Called every kReleaseBytes behind
+// the scans.
+void release_pages(const char* base, std::size_t from, std::size_t to);
+inline constexpr std::size_t kReleaseBytes = std::size_t{16} << 20;
+
 // Parses every data line into the columns selected by `cols` (header cell -> column index
 // or -1 to skip), in parallel; throws CsvParseError naming the first bad row.
 void parse_rows(const char* data, const Lines& lines, const std::vector<std::string>& header,

@@ -59,41 +59,67 @@ class MappedFile {
   std::size_t size_ = 0;
 };
 
-// Offsets of every '\n', found in parallel over byte ranges (memchr-bound).
-std::vector<std::size_t> find_newlines(const char* data, std::size_t size, int threads) {
+}  // namespace
+
+void csv_detail::release_pages(const char* base, std::size_t from, std::size_t to) {
+  static const std::size_t page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+  const std::size_t lo = (from + page - 1) / page * page, hi = to / page * page;
+  if (hi > lo) ::madvise(const_cast<char*>(base) + lo, hi - lo, MADV_DONTNEED);
+}
+
+namespace {
+
+// Offsets of every '\n', found in parallel over byte ranges (memchr-bound), each flagged
+// when a '\r' precedes it. The flag is taken while the page is hot, so the index below
+// never touches the text again and released pages stay released.
+struct Newlines {
+  std::vector<std::size_t> pos;
+  std::vector<std::uint8_t> cr;
+};
+
+Newlines find_newlines(const char* data, std::size_t size, int threads) {
   std::mutex mutex;
-  std::vector<std::pair<std::size_t, std::vector<std::size_t>>> parts;
+  std::vector<std::pair<std::size_t, Newlines>> parts;
   parallel_for(size, std::size_t{1} << 22, [&](std::size_t lo, std::size_t hi) {
-    std::vector<std::size_t> found;
-    for (const char* p = data + lo; p < data + hi; ++p) {
-      p = static_cast<const char*>(std::memchr(p, '\n', static_cast<std::size_t>(data + hi - p)));
-      if (!p) break;
-      found.push_back(static_cast<std::size_t>(p - data));
+    Newlines found;
+    for (std::size_t a = lo; a < hi; a += kReleaseBytes) {
+      const std::size_t b = std::min(hi, a + kReleaseBytes);
+      for (const char* p = data + a; p < data + b; ++p) {
+        p = static_cast<const char*>(std::memchr(p, '\n', static_cast<std::size_t>(data + b - p)));
+        if (!p) break;
+        found.pos.push_back(static_cast<std::size_t>(p - data));
+        found.cr.push_back(p > data && p[-1] == '\r');
+      }
+      release_pages(data, a, b);
     }
     std::lock_guard<std::mutex> lock(mutex);
     parts.emplace_back(lo, std::move(found));
   }, threads);
   std::sort(parts.begin(), parts.end(),
             [](const auto& a, const auto& b) { return a.first < b.first; });
-  std::vector<std::size_t> all;
-  for (auto& part : parts) all.insert(all.end(), part.second.begin(), part.second.end());
+  Newlines all;
+  for (auto& part : parts) {
+    all.pos.insert(all.pos.end(), part.second.pos.begin(), part.second.pos.end());
+    all.cr.insert(all.cr.end(), part.second.cr.begin(), part.second.cr.end());
+  }
   return all;
 }
 
 // Splits the file into the header and the non-blank data lines ('\r\n' or '\n').
 Lines index_lines(const char* data, std::size_t size, int threads) {
-  const std::vector<std::size_t> nl = find_newlines(data, size, threads);
+  const Newlines nl = find_newlines(data, size, threads);
   Lines lines;
-  lines.last_unterminated = nl.empty() || nl.back() + 1 != size;
-  const std::size_t count = nl.size() + (lines.last_unterminated ? 1 : 0);
+  lines.last_unterminated = nl.pos.empty() || nl.pos.back() + 1 != size;
+  const std::size_t count = nl.pos.size() + (lines.last_unterminated ? 1 : 0);
   lines.begin.reserve(count);
   lines.end.reserve(count);
   lines.number.reserve(count);
   std::size_t start = 0;
   for (std::size_t k = 0; k < count; ++k) {
-    std::size_t stop = k < nl.size() ? nl[k] : size;
+    std::size_t stop = k < nl.pos.size() ? nl.pos[k] : size;
     const std::size_t next = stop + 1;
-    if (stop > start && data[stop - 1] == '\r') --stop;
+    const bool cr = k < nl.pos.size() ? nl.cr[k] != 0 : (stop > start && data[stop - 1] == '\r');
+    if (cr && stop > start) --stop;
     if (k == 0) {
       lines.header = std::string_view(data + start, stop - start);
     } else if (stop > start) {  // blank lines are skipped, as pandas does

@@ -82,7 +82,12 @@ inline bool parse_cell(const Target& t, std::size_t row, const char*& p, const c
 void parse_block(const char* data, const Lines& lines, const std::vector<Target>& targets,
                  Block& b) {
   const std::size_t n = targets.size();
+  std::size_t released = lines.begin[b.lo];
   for (std::size_t row = b.lo; row < b.hi; ++row) {
+    if (lines.begin[row] - released >= kReleaseBytes) {
+      release_pages(data, released, lines.begin[row]);
+      released = lines.begin[row];
+    }
     const char* p = data + lines.begin[row];
     const char* end = data + lines.end[row];
     for (std::size_t c = 0; c < n; ++c) {
