@@ -29,9 +29,15 @@ demo: install
 	$(PY) -m bsp_fast convert demo-out/dataset demo-out/clips.h5 --verify --force
 	$(PY) tools/h5_summary.py demo-out/clips.h5
 
+# The speed comparisons behind the README's tables (several minutes; not part of the tests).
 bench: install
 	$(PY) benchmarks/bench_kinematics.py
+	$(PY) benchmarks/bench_csv.py
 	$(PY) benchmarks/bench_convert.py
+	$(PY) benchmarks/bench_media.py
+	$(PY) benchmarks/bench_convert_media.py
+	$(PY) benchmarks/bench_loader.py
+	$(PY) benchmarks/bench_synth.py
 
 clean:
 	rm -rf build dist *.egg-info demo-out

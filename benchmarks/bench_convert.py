@@ -69,7 +69,7 @@ def run_convert(dataset: Path, out: Path, *extra) -> tuple:
     # The child reports its own peak RSS (KiB) on its last stderr line.
     code = ("import sys, resource; from bsp_fast.conversion import main; rc = main(sys.argv[1:]); "
             "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); sys.exit(rc)")
-    cmd = [sys.executable, "-c", code, str(dataset), str(out), "--force", "--quiet", *extra]
+    cmd = [sys.executable, "-c", code, str(dataset), str(out), "--force", "--quiet", "--no-media", *extra]
     t0 = time.perf_counter()
     p = subprocess.run(cmd, check=True, capture_output=True, text=True)
     wall = time.perf_counter() - t0
