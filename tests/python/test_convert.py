@@ -108,8 +108,9 @@ def test_crossing_column_names_reordered_columns_and_crlf(tmp_path):
     cols = COLUMNS[::-1]
     other = write_dataset(tmp_path / "other", rows, columns=cols, newline="\r\n",
                           crossing_name="frame.pedestrian.is_on_driving_lane")
-    a = read_all(cv.convert(base, tmp_path / "a.h5", clip_length=10, val_frac=0, test_frac=0, media=False)["output"])
-    b = read_all(cv.convert(other, tmp_path / "b.h5", clip_length=10, val_frac=0, test_frac=0, media=False)["output"])
+    opts = dict(clip_length=10, val_frac=0, test_frac=0, media=False)
+    a = read_all(cv.convert(base, tmp_path / "a.h5", **opts)["output"])
+    b = read_all(cv.convert(other, tmp_path / "b.h5", **opts)["output"])
     for k in a:
         if k != "attrs":
             np.testing.assert_array_equal(a[k], b[k], err_msg=k)
@@ -210,7 +211,8 @@ def test_verify_reports_agreement_and_flags_tampering(tmp_path):
     rep = cv.convert(bad, tmp_path / "b.h5", verify=True, clip_length=10, media=False)
     assert 45 < rep["verify"][0]["component_mm"] < 55
     assert len(rep["verify_failed"]) == 1
-    assert cv.main(["--no-media", str(bad), str(tmp_path / "c.h5"), "--verify", "--quiet", "--clip-length", "10"]) == 4
+    assert cv.main(["--no-media", str(bad), str(tmp_path / "c.h5"), "--verify", "--quiet",
+                    "--clip-length", "10"]) == 4
 
 
 def test_fov_from_config_yaml(tmp_path):
@@ -232,7 +234,8 @@ def test_bad_options_are_value_errors(ds, tmp_path):
 
 def test_cli_runs_as_a_module(ds, tmp_path):
     out = tmp_path / "o.h5"
-    p = subprocess.run([sys.executable, "-m", "bsp_fast", "convert", str(ds), str(out), "--clip-length", "10", "--no-media"],
+    p = subprocess.run([sys.executable, "-m", "bsp_fast", "convert", str(ds), str(out), "--clip-length", "10",
+                        "--no-media"],
                        capture_output=True, text=True, env={**os.environ})
     assert p.returncode == 0, p.stderr
     assert "train" in p.stdout and "rows/s" in p.stdout

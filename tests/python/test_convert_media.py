@@ -107,6 +107,9 @@ def expected_visible(tags, uv, r=2):
 def test_frame_table_layout_and_clip_frames(converted):
     d = read_all(converted["output"])
     assert d["attrs"]["media"] == 1 and d["attrs"]["crop_size"] == S
+    with h5py.File(converted["output"]) as f:  # measured defaults: deflated masks, plain RGB
+        assert f["train/frames/mask"].compression == "gzip" and f["train/frames/rgb"].compression is None
+        assert f["train/frames/rgb"].chunks[0] == 16
     total = 0
     for s in SPLITS:
         cf, fidx = d[f"{s}/clip_frames"], d[f"{s}/frames/frame_idx"]
@@ -181,7 +184,7 @@ def copy_dataset(ds, tmp_path):
     return shutil.copytree(ds, tmp_path / "copy")
 
 
-def first_video(converted, split_min_frames=1):
+def first_video(converted):
     with h5py.File(converted["output"]) as f:
         for s in SPLITS:
             if f[f"{s}/clip_frames"].shape[0]:
