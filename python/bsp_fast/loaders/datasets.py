@@ -39,6 +39,7 @@ _SPLIT_CODE = {s: i for i, s in enumerate(SPLITS)}
 _META_STR = ("video_id", "pedestrian_id", "age", "gender")
 _META_INT = ("clip_id", "start_frame", "end_frame")
 _MEDIA = ("frames/rgb", "frames/crop_box", "frames/joint_visible", "clip_frames")
+_CHANNELS_FIRST = (0, 1, 4, 2, 3)  # (B, L, S, S, 3) -> (B, L, 3, S, S)
 
 _open_datasets: "weakref.WeakSet[ClipDataset]" = weakref.WeakSet()
 
@@ -267,9 +268,12 @@ class ClipDataset(torch.utils.data.Dataset):
             out["targets"] = out["label"]
         meta = self._meta_batch(pos, rows, reader)
         strings = {k: self._meta[k][rows].tolist() for k in _META_STR}
+        permute = {"inputs": _CHANNELS_FIRST} if self.task == "pose_estimation" else {}
         if torch.utils.data.get_worker_info() is not None:  # leaving a worker: one buffer
-            return pack_batch(out, meta, strings)
+            return pack_batch(out, meta, strings, permute)
         batch = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in out.items()}
+        for k, order in permute.items():
+            batch[k] = batch[k].permute(*order)
         batch["meta"] = {k: torch.from_numpy(v) for k, v in meta.items()}
         batch["meta"].update(strings)
         return batch
@@ -323,7 +327,9 @@ class ClipDataset(torch.utils.data.Dataset):
         size = np.stack([box[..., 2] - box[..., 0], box[..., 3] - box[..., 1]], -1)
         crop = (pixels - box[..., None, :2]) * (S / size)[..., None, :]
         vis = freader.read(self._dataset("frames/joint_visible")).reshape(B, L, -1) != 0
-        out = dict(inputs=rgb.reshape((B, L) + rgb.shape[1:]).transpose(0, 1, 4, 2, 3),
+        # stored channels-last; handed out as a channels-first VIEW (B, L, 3, S, S): a
+        # transposing copy of the images would cost more than reading them
+        out = dict(inputs=rgb.reshape((B, L) + rgb.shape[1:]),
                    targets=crop.astype(np.float32), visible=vis, crop_box=box)
         if self.with_pixels:
             out["pixels"] = pixels

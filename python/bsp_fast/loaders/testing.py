@@ -148,8 +148,10 @@ def _write_media(g, recs, clips, L, S, rows):
     rng = np.random.default_rng(F)
     vis = (rng.random((F, 26)) > 0.1).astype(np.uint8)
     frames = np.array([base[r] + f for r, f in zip(clips["rec"], clips["first"])])
-    g.create_dataset("frames/rgb", data=rgb, chunks=(1, S, S, 3))
-    g.create_dataset("frames/mask", data=mask, chunks=(1, S, S))
+    k = max(1, min(64, F))  # bsp-convert's layout: 64-frame chunks, deflated masks
+    g.create_dataset("frames/rgb", data=rgb, chunks=(k, S, S, 3))
+    g.create_dataset("frames/mask", data=mask, chunks=(k, S, S), compression="gzip",
+                     compression_opts=1)
     g.create_dataset("frames/crop_box", data=box)
     g.create_dataset("frames/joint_visible", data=vis)
     mb = np.tile(np.array([S / 3, S / 4, 2 * S / 3, 3 * S / 4], np.float32), (F, 1))

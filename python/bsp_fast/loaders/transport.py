@@ -94,10 +94,12 @@ def _unpack_batch(buffer, key, layout: dict, strings: dict) -> dict:
         _remember(key, buffer)
     raw = buffer.numpy()
     batch: dict = {"meta": dict(strings)}
-    for name, (offset, nbytes, dtype, shape) in layout.items():
+    for name, (offset, nbytes, dtype, shape, order) in layout.items():
         t = torch.empty(shape, dtype=getattr(torch, dtype))
         view = raw[offset:offset + nbytes].view(t.numpy().dtype).reshape(shape)
         np.copyto(t.numpy(), view)
+        if order is not None:
+            t = t.permute(*order)
         if name.startswith("meta/"):
             batch["meta"][name[5:]] = t
         else:
@@ -119,18 +121,20 @@ class _PackedBatch:
         return (_unpack_batch, (None if sent else buffer, key, self.layout, self.strings))
 
 
-def pack_batch(arrays: dict, meta: dict, strings: dict) -> _PackedBatch:
+def pack_batch(arrays: dict, meta: dict, strings: dict, permute: dict | None = None
+               ) -> _PackedBatch:
     """Packs NumPy ``arrays`` and ``meta`` arrays (and ``meta`` string lists) in a worker;
-    the main process receives ``{**arrays, "meta": {**meta, **strings}}`` as tensors."""
+    the main process receives ``{**arrays, "meta": {**meta, **strings}}`` as tensors, the
+    arrays named in ``permute`` as ``tensor.permute(*order)`` views."""
     items = list(arrays.items()) + [(f"meta/{k}", v) for k, v in meta.items()]
     layout, total = {}, _HEADER
     for name, a in items:
         dtype = "bool" if a.dtype == np.bool_ else str(a.dtype)
-        layout[name] = (total, a.nbytes, dtype, tuple(a.shape))
+        layout[name] = (total, a.nbytes, dtype, tuple(a.shape), (permute or {}).get(name))
         total += -(-a.nbytes // 64) * 64  # 64-byte aligned arrays
     slot = _acquire(total - _HEADER)
     raw = slot[1]
     for name, a in items:
-        offset, nbytes, _, shape = layout[name]
+        offset, nbytes, _, shape, _ = layout[name]
         np.copyto(raw[offset:offset + nbytes].view(a.dtype).reshape(shape), a)
     return _PackedBatch(slot, layout, strings)
