@@ -12,7 +12,8 @@ Without ``--h5`` the script writes a schema-v1 file with ``bsp_fast.loaders.test
 (20,000 train clips by default; plus a small media file for ``pose_estimation``) to a
 temporary directory. Train-split settings: noise sigma 5 px and missing-joint
 probability 0.2944 (the report's first MJP) for the 2D-input tasks, flips and rotations
-for classification and autoencoder.
+for classification and autoencoder. Rates exclude the first batch (worker start-up); the
+CPU column is the CPU time of all processes per clip, start-up included.
 
     PYTHONPATH=python:build/<dir>/py python3 benchmarks/bench_loader.py
 """
@@ -88,7 +89,8 @@ class NaiveClips(torch.utils.data.Dataset):
 
 def _cpu() -> float:
     """CPU seconds of this process and of its exited children (the DataLoader workers)."""
-    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
 
 
