@@ -301,3 +301,13 @@ def test_packing_in_process_ring_and_one_off_buffers(monkeypatch):
     assert again.slot[2] == keys[0] and again.slot[3]  # reused; sent as a key only
     b = pickle.loads(ForkingPickler.dumps(again))
     np.testing.assert_array_equal(b["x"].numpy(), arrays["x"])
+
+
+def test_bsp_fast_data_is_the_loaders_api():
+    import bsp_fast.data as data
+    from bsp_fast import loaders
+
+    assert data.ClipDataset is loaders.ClipDataset
+    assert data.BSPDataModule is loaders.BSPDataModule
+    assert data.normalize_hips_neck is loaders.normalize_hips_neck
+    assert set(loaders.__all__) <= set(dir(data))
