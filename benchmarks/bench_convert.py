@@ -66,9 +66,11 @@ def csv_stage(path: Path, nrows: int, pandas_rows: int) -> list:
 
 
 def run_convert(dataset: Path, out: Path, *extra) -> tuple:
-    # The child reports its own peak RSS (KiB) on its last stderr line.
-    code = ("import sys, resource; from bsp_fast.conversion import main; rc = main(sys.argv[1:]); "
-            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); sys.exit(rc)")
+    # The child reports its own peak RSS (KiB) on its last stderr line. VmHWM, not ru_maxrss:
+    # Linux carries ru_maxrss over from the forking parent (which holds the generated data).
+    code = ("import re, sys; from bsp_fast.conversion import main; rc = main(sys.argv[1:]); "
+            "print(re.search(r'VmHWM:\\s+(\\d+)', open('/proc/self/status').read()).group(1), "
+            "file=sys.stderr); sys.exit(rc)")
     cmd = [sys.executable, "-c", code, str(dataset), str(out), "--force", "--quiet", "--no-media", *extra]
     t0 = time.perf_counter()
     p = subprocess.run(cmd, check=True, capture_output=True, text=True)
