@@ -48,7 +48,31 @@ def _frames(frames, shape: tuple, what: str) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-class VideoWriter:
+class _Writer:
+    """Shared life cycle of the writers: the file appears under `path` only on close()."""
+
+    _w = None  # the core writer
+
+    @property
+    def frames_written(self) -> int:
+        return self._w.frames_written
+
+    def close(self) -> None:
+        """Finishes the file and moves it to `path`. Safe to call twice."""
+        self._w.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.close()
+        else:
+            del self._w  # an interrupted file is deleted, never left half-written
+        return False
+
+
+class VideoWriter(_Writer):
     """H.264 (High profile, yuv420p) MP4 writer, x264 in average-bitrate mode.
 
     Frames are (H, W, 3) or (K, H, W, 3) uint8 RGB. The file appears at `path` only when
@@ -71,23 +95,6 @@ class VideoWriter:
         """Encodes (H, W, 3) or (K, H, W, 3) uint8 RGB frames."""
         self._w.write(_frames(frames, (self.height, self.width, 3), "frames"))
 
-    @property
-    def frames_written(self) -> int:
-        return self._w.frames_written
-
-    def close(self) -> None:
-        """Flushes the encoder and moves the finished file to `path`. Safe to call twice."""
-        self._w.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, exc_type, exc, tb):
-        if exc_type is None:
-            self.close()
-        else:
-            del self._w  # an interrupted file is deleted, never left half-written
-        return False
 
 
 def _palette(palette) -> np.ndarray:
@@ -103,7 +110,7 @@ def _palette(palette) -> np.ndarray:
     return full
 
 
-class ApngWriter:
+class ApngWriter(_Writer):
     """8-bit palette-indexed APNG writer; pixel values are CARLA semantic tags.
 
     Frames are (H, W) or (K, H, W) uint8. Later frames store only the rectangle that
@@ -126,26 +133,8 @@ class ApngWriter:
         self._w.write(_frames(frames, (self.height, self.width), "frames"))
 
     @property
-    def frames_written(self) -> int:
-        return self._w.frames_written
-
-    @property
     def frames_stored(self) -> int:
         return self._w.frames_stored
-
-    def close(self) -> None:
-        """Stores the last frame, fixes the frame count and moves the file to `path`."""
-        self._w.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, exc_type, exc, tb):
-        if exc_type is None:
-            self.close()
-        else:
-            del self._w
-        return False
 
 
 # ---------------------------------------------------------------- readers
