@@ -297,13 +297,13 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
   ConvertReport base;
   auto t0 = Clock::now();
   base.source_crc32 = file_crc32(csv_path, base.source_bytes);
-  if (progress) progress->total = base.source_bytes;
   CsvReadOptions ro;
   ro.columns = needed_columns(opt.media.enabled);
   ro.threads = opt.threads;
+  if (progress) ro.rows_total = &progress->total, ro.rows_done = &progress->done;  // stage 0: rows
   const PoseTable table = read_pose_csv(csv_path, ro);
   base.seconds["read"] = since(t0);
-  if (progress) progress->done = base.source_bytes, progress->stage = 1;
+  if (progress) progress->done = table.rows, progress->stage = 1;
 
   std::set<RecordingKey> excluded;
   std::vector<BadMedia> bad;

@@ -75,7 +75,8 @@ inline constexpr std::size_t kReleaseBytes = std::size_t{16} << 20;
 // Parses every data line into the columns selected by `cols` (header cell -> column index
 // or -1 to skip), in parallel; throws CsvParseError naming the first bad row.
 void parse_rows(const char* data, const Lines& lines, const std::vector<std::string>& header,
-                const std::vector<int>& cols, PoseTable& t, int threads);
+                const std::vector<int>& cols, PoseTable& t, int threads,
+                std::atomic<std::uint64_t>* rows_done = nullptr);
 
 // ------------------------------------------------------------------------ scanners
 inline const char* skip_spaces(const char* p, const char* end) {

@@ -258,7 +258,8 @@ PoseTable read_pose_csv(const std::string& path, const CsvReadOptions& opt) {
   const std::vector<int> cols = map_header(names, wanted, opt, t);
   t.rows = lines.begin.size();
   t.line = lines.number;
-  csv_detail::parse_rows(file.data(), lines, names, cols, t, threads);
+  if (opt.rows_total) *opt.rows_total = t.rows;
+  csv_detail::parse_rows(file.data(), lines, names, cols, t, threads, opt.rows_done);
   if (opt.check_duplicates) check_duplicates(t);
   return t;
 }

@@ -80,7 +80,7 @@ inline bool parse_cell(const Target& t, std::size_t row, const char*& p, const c
 
 // Parses rows [b.lo, b.hi); stops at the first bad row and records where.
 void parse_block(const char* data, const Lines& lines, const std::vector<Target>& targets,
-                 Block& b) {
+                 Block& b, std::atomic<std::uint64_t>* rows_done) {
   const std::size_t n = targets.size();
   std::size_t released = lines.begin[b.lo];
   for (std::size_t row = b.lo; row < b.hi; ++row) {
@@ -88,6 +88,7 @@ void parse_block(const char* data, const Lines& lines, const std::vector<Target>
       release_pages(data, released, lines.begin[row]);
       released = lines.begin[row];
     }
+    if (rows_done && (row - b.lo) % 256 == 255) *rows_done += 256;
     const char* p = data + lines.begin[row];
     const char* end = data + lines.end[row];
     for (std::size_t c = 0; c < n; ++c) {
@@ -100,6 +101,7 @@ void parse_block(const char* data, const Lines& lines, const std::vector<Target>
       }
     }
   }
+  if (rows_done) *rows_done += (b.hi - b.lo) % 256;  // the rows not yet counted above
 }
 
 // Sizes the selected columns and points one Target at each header cell.
@@ -159,7 +161,8 @@ void merge_strings(const std::vector<std::unique_ptr<Block>>& blocks,
 }  // namespace
 
 void parse_rows(const char* data, const Lines& lines, const std::vector<std::string>& header,
-                const std::vector<int>& cols, PoseTable& t, int threads) {
+                const std::vector<int>& cols, PoseTable& t, int threads,
+                std::atomic<std::uint64_t>* rows_done) {
   int dicts = 0;
   const std::vector<Target> targets = make_targets(cols, t, dicts);
   std::mutex mutex;
@@ -168,7 +171,7 @@ void parse_rows(const char* data, const Lines& lines, const std::vector<std::str
     auto b = std::make_unique<Block>();
     b->lo = lo, b->hi = hi;
     b->dicts.resize(static_cast<std::size_t>(dicts));
-    parse_block(data, lines, targets, *b);
+    parse_block(data, lines, targets, *b, rows_done);
     std::lock_guard<std::mutex> lock(mutex);
     blocks.push_back(std::move(b));
   }, threads);

@@ -245,7 +245,7 @@ def _bar(stage: int, total: int):
 
     name = _STAGES[min(stage, len(_STAGES) - 1)]
     if stage == 0:
-        return tqdm(total=total, desc=name, unit="B", unit_scale=True, file=sys.stderr)
+        return tqdm(total=total, desc=name, unit="row", unit_scale=True, file=sys.stderr)
     if stage == 3:
         return tqdm(total=total, desc=name, unit="clip", file=sys.stderr)
     if stage == 5:

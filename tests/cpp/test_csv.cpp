@@ -397,3 +397,21 @@ TEST_CASE("read_pose_csv errors name the file, line, column, expected and found"
     CHECK(error_of((tmp.dir / "nope.csv").string()).find("cannot open") != std::string::npos);
   }
 }
+
+TEST_CASE("read_pose_csv reports its progress in rows") {
+  TempDir tmp;
+  std::string text = header_line();
+  for (int f = 0; f < 700; ++f) text += join(row_cells(f));
+  const std::string path = tmp.write("data.csv", text);
+  for (int threads : {1, 2}) {
+    std::atomic<std::uint64_t> total{0}, done{0};
+    CsvReadOptions opt;
+    opt.threads = threads;
+    opt.rows_total = &total;
+    opt.rows_done = &done;
+    const PoseTable t = read_pose_csv(path, opt);
+    CHECK(t.rows == 700);
+    CHECK(total.load() == 700);
+    CHECK(done.load() == 700);
+  }
+}

@@ -239,3 +239,4 @@ def test_cli_runs_as_a_module(ds, tmp_path):
                        capture_output=True, text=True, env={**os.environ})
     assert p.returncode == 0, p.stderr
     assert "train" in p.stdout and "rows/s" in p.stdout
+

@@ -42,7 +42,7 @@ struct ConvertOptions {
 // Polled by the Python side from another thread (no callbacks into Python).
 struct ConvertProgress {
   // 0 read, 1 plan, 2 verify, 3 write clips, 4 done, 5 check media files, 6 media frames
-  // (done/total count bytes in stage 0, media files in 5, frames in 6, clips otherwise).
+  // (done/total count rows in stage 0, media files in 5, frames in 6, clips otherwise).
   std::atomic<int> stage{0};
   std::atomic<std::uint64_t> done{0}, total{0};
 };

@@ -7,6 +7,7 @@
 // count. Writing reproduces pandas `DataFrame.to_csv(index=False)` byte for byte.
 #pragma once
 #include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -58,6 +59,10 @@ struct CsvReadOptions {
   std::vector<std::string> columns;
   int threads = 0;  // 0 = bsp::num_threads()
   bool check_duplicates = true;
+  // Optional progress for another thread to poll: the number of data rows once the file
+  // is indexed, then the rows parsed so far (updated every few hundred rows).
+  std::atomic<std::uint64_t>* rows_total = nullptr;
+  std::atomic<std::uint64_t>* rows_done = nullptr;
 };
 
 // Throws CsvParseError (file, line, column, what was expected and what was found) for bad
