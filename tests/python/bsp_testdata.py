@@ -11,6 +11,8 @@ import numpy as np
 import bsp_fast as bf
 from bsp_fast import skeleton as sk
 
+# The 24 columns in the original writer's order (SPEC section 1), written out independently
+# of the core so tests compare against the spec, not against the code under test.
 COLUMNS = [
     "id", "world.map", "camera.idx", "camera.transform", "camera.width", "camera.height",
     "pedestrian.idx", "pedestrian.model", "pedestrian.age", "pedestrian.gender",

@@ -13,6 +13,7 @@ import pytest
 import bsp_fast
 from bsp_fast import geometry as geo
 from bsp_fast.csvio import COLUMNS, read_csv
+from bsp_testdata import COLUMNS as SPEC_COLUMN_LIST
 from bsp_fast.synth import generate
 from bsp_fast.synth import clip as synth_clip
 from bsp_fast.synth.cli import main as cli_main
@@ -22,15 +23,7 @@ pd = pytest.importorskip("pandas")
 av = pytest.importorskip("av")
 Image = pytest.importorskip("PIL.Image")
 
-SPEC_COLUMNS = (
-    "id", "world.map", "camera.idx", "camera.transform", "camera.width", "camera.height",
-    "pedestrian.idx", "pedestrian.model", "pedestrian.age", "pedestrian.gender",
-    "pedestrian.spawn_point", "frame.idx", "camera.recording", "camera.semantic_segmentation",
-    "world.frame", "frame.pedestrian.transform", "frame.pedestrian.velocity",
-    "frame.pedestrian.pose.world", "frame.pedestrian.pose.component",
-    "frame.pedestrian.pose.relative", "frame.pedestrian.is_crossing",
-    "frame.pedestrian.pose.camera", "frame.pedestrian.pose.in_frame",
-    "frame.pedestrian.pose.in_segmentation")
+SPEC_COLUMNS = tuple(SPEC_COLUMN_LIST)  # the writer order of SPEC section 1
 OPTS = dict(clips=3, frames=150, size="320x128", seed=27)  # adults, children, crossings, gaps
 
 
