@@ -1,11 +1,8 @@
 """The one place that imports the private C++ module."""
 from __future__ import annotations
 
-# During development the module may live in a build tree (PYTHONPATH=python:build/dev/py);
-# extend the package path so `bsp_fast._core` is found there too.
-import pkgutil as _pkgutil
-
-
+# (bsp_fast/__init__.py extends the package path, so a development build tree on
+# PYTHONPATH=python:build/dev/py provides `_core` too.)
 try:
     from . import _core  # type: ignore[attr-defined]
 except ImportError as exc:  # pragma: no cover - only hit on a broken install
@@ -15,4 +12,3 @@ except ImportError as exc:  # pragma: no cover - only hit on a broken install
     ) from exc
 
 core = _core
-del _pkgutil
