@@ -1,4 +1,4 @@
-"""Clips per second of ``bsp_fast.loaders.ClipDataset`` against a naive per-item h5py reader.
+"""Clips per second of ``bsp_fast.data.ClipDataset`` against a naive per-item h5py reader.
 
 Both loaders do the same per-clip work (read, deform, augment, normalise, to torch) and go
 through a ``torch.utils.data.DataLoader`` with the same batch size and worker count, in the
@@ -8,7 +8,7 @@ tensors, which ``default_collate`` stacks; it reads random clips (``shuffle=True
 ``ClipDataset`` reads contiguous runs of clips with one HDF5 call per dataset and run and
 transforms whole batches (``__getitems__``).
 
-Without ``--h5`` the script writes a schema-v1 file with ``bsp_fast.loaders.testing``
+Without ``--h5`` the script writes a schema-v1 file with ``bsp_fast.data.testing``
 (20,000 train clips by default; plus a small media file for ``pose_estimation``) to a
 temporary directory. Train-split settings: noise sigma 5 px and missing-joint
 probability 0.2944 (the report's first MJP) for the 2D-input tasks, flips and rotations
@@ -33,8 +33,8 @@ import numpy as np
 import torch
 import torch.utils.data
 
-from bsp_fast.loaders import ClipDataset, transforms as T
-from bsp_fast.loaders.testing import write_clip_file
+from bsp_fast.data import ClipDataset, transforms as T
+from bsp_fast.data.testing import write_clip_file
 
 TASKS_2D = ("classification", "autoencoder", "lifting")
 

@@ -1,6 +1,6 @@
 """The 26-joint CARLA pedestrian skeleton and its reference T-poses (SPEC section 2).
 
-Reference poses are loaded from the package data (``data/carla_skeleton/*.yaml``), which
+Reference poses are loaded from the package data (``resources/carla_skeleton/*.yaml``), which
 store locations in centimetres; :func:`reference_pose` returns metres and degrees.
 """
 from __future__ import annotations
@@ -34,7 +34,7 @@ GENDERS = ("female", "male")
 
 
 def _data_file(name: str):
-    return resources.files("bsp_fast").joinpath("data", "carla_skeleton", name)
+    return resources.files("bsp_fast").joinpath("resources", "carla_skeleton", name)
 
 
 def _read_yaml(name: str):

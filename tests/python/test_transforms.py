@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from bsp_fast.loaders import (
+from bsp_fast.data import (
     Compose,
     Deform,
     GaussianNoise,

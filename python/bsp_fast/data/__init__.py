@@ -1,18 +1,56 @@
-"""``bsp_fast.data``: the dataset API under the name the project's issues use.
+"""PyTorch datasets, transforms and a Lightning DataModule over ``bsp-convert`` HDF5 files.
 
-Everything here is :mod:`bsp_fast.loaders` (PyTorch datasets, transforms, the DataModule);
-this folder also carries the package data (``carla_skeleton/*.yaml``).
+See docs/data.md. The transforms are plain NumPy; the torch-based names (``ClipDataset``,
+``ContiguousBatchSampler``, ...) and ``BSPDataModule`` (Lightning) are imported on first
+access, because importing torch and Lightning takes seconds.
 """
 from __future__ import annotations
 
-from .. import loaders as _loaders
+from .transforms import (
+    Compose,
+    Deform,
+    GaussianNoise,
+    HipsNeckDenormalize,
+    HipsNeckNormalize,
+    HorizontalFlip,
+    MissingJoints,
+    NormalizedPose,
+    RandomFlipRotate,
+    RandomRotation,
+    denormalize_hips_neck,
+    flip_horizontal,
+    flip_rotate,
+    joint_bbox,
+    normalize_hips_neck,
+    normalize_hips_neck_3d,
+    rotate,
+    visible_joints,
+)
 
-__all__ = list(_loaders.__all__)
+__all__ = [
+    "ClipDataset", "BSPDataModule", "ContiguousBatchSampler", "IndexBatch", "collate_batch",
+    "TASKS", "SPLITS", "LIFTING_TARGETS", "DEFAULT_EVAL_SEED",
+    "Compose", "Deform", "GaussianNoise", "MissingJoints", "HorizontalFlip", "RandomRotation",
+    "RandomFlipRotate", "HipsNeckNormalize", "HipsNeckDenormalize", "NormalizedPose",
+    "normalize_hips_neck",
+    "denormalize_hips_neck", "normalize_hips_neck_3d", "flip_horizontal", "flip_rotate", "rotate",
+    "joint_bbox", "visible_joints",
+]
 
 
-def __getattr__(name):  # lazily, like bsp_fast.loaders (torch imports take seconds)
-    return getattr(_loaders, name)
+_LAZY = {"ContiguousBatchSampler": "sampling", "IndexBatch": "sampling",
+         "collate_batch": "sampling", "ClipDataset": "datasets", "TASKS": "datasets",
+         "SPLITS": "datasets", "LIFTING_TARGETS": "datasets", "DEFAULT_EVAL_SEED": "datasets",
+         "BSPDataModule": "datamodule"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_loaders.__all__))
+    return sorted(set(globals()) | set(_LAZY))

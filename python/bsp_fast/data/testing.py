@@ -205,7 +205,7 @@ def _root_attrs(f, L, stride, seed):
     import h5py
 
     s = h5py.string_dtype()
-    f.attrs.update({"schema_version": 1, "created_by": "bsp_fast.loaders.testing",
+    f.attrs.update({"schema_version": 1, "created_by": "bsp_fast.data.testing",
                     "clip_length": L, "clip_stride": stride, "eval_clip_stride": stride,
                     "min_video_length": L, "label_rule": "last", "benchmark": 0,
                     "val_frac": 0.2, "test_frac": 0.2, "seed": seed, "balance": 0,

@@ -1,6 +1,6 @@
 """``ClipDataset``: one split of a ``bsp-convert`` HDF5 file as batches of torch tensors.
 
-The four tasks of the report (see docs/loaders.md for every key and shape):
+The four tasks of the report (see docs/data.md for every key and shape):
 
 * ``classification``: normalised 2D clip -> crossing label;
 * ``autoencoder``: deformed normalised 2D -> clean normalised 2D;

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import torch
 
-from bsp_fast.loaders import BSPDataModule, ClipDataset
-from bsp_fast.loaders.testing import write_clip_file
+from bsp_fast.data import BSPDataModule, ClipDataset
+from bsp_fast.data.testing import write_clip_file
 
 
 @pytest.fixture(scope="module")
@@ -163,7 +163,7 @@ def test_two_workers_over_a_converted_synth_sample_yield_each_clip_once(synth_sa
 def test_plain_class_without_lightning(h5file, monkeypatch):
     import sys
 
-    import bsp_fast.loaders.datamodule as dmod
+    import bsp_fast.data.datamodule as dmod
 
     for name in ("lightning", "lightning.pytorch", "pytorch_lightning"):
         monkeypatch.setitem(sys.modules, name, None)  # makes the import fail

@@ -1,6 +1,6 @@
 """ClipDataset and ContiguousBatchSampler on small files in the documented HDF5 schema.
 
-The files come from ``bsp_fast.loaders.testing.write_clip_file`` (h5py, exact schema,
+The files come from ``bsp_fast.data.testing.write_clip_file`` (h5py, exact schema,
 kinematically consistent poses); media (``frames/rgb`` ...) follow the future layout that
 bsp-convert does not write yet.
 """
@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 import torch
 
-from bsp_fast.loaders import (
+from bsp_fast.data import (
     ClipDataset,
     ContiguousBatchSampler,
     IndexBatch,
     flip_horizontal,
     normalize_hips_neck,
 )
-from bsp_fast.loaders.testing import write_clip_file
+from bsp_fast.data.testing import write_clip_file
 
 TASKS = ("classification", "autoencoder", "lifting", "pose_estimation")
 L, S = 8, 32
@@ -267,7 +267,7 @@ def test_balancing_a_split_without_one_class_leaves_it_empty(h5file):
 
 
 def test_worker_ring_buffers_are_reused_across_many_batches(h5file):
-    from bsp_fast.loaders import transport
+    from bsp_fast.data import transport
 
     ds = ClipDataset(h5file, "val", "autoencoder", noise=5.0, mjp=0.2)
     loader = ds.loader(batch_size=1, num_workers=2)  # 12 batches per worker > RING_SLOTS
@@ -282,7 +282,7 @@ def test_packing_in_process_ring_and_one_off_buffers(monkeypatch):
     import pickle
     from multiprocessing.reduction import ForkingPickler
 
-    from bsp_fast.loaders import transport
+    from bsp_fast.data import transport
 
     monkeypatch.setattr(transport, "_ring", [])
     monkeypatch.setattr(transport, "_mapped", {})
@@ -303,11 +303,21 @@ def test_packing_in_process_ring_and_one_off_buffers(monkeypatch):
     np.testing.assert_array_equal(b["x"].numpy(), arrays["x"])
 
 
-def test_bsp_fast_data_is_the_loaders_api():
-    import bsp_fast.data as data
-    from bsp_fast import loaders
+def test_one_public_name_for_datasets():
+    import importlib
 
-    assert data.ClipDataset is loaders.ClipDataset
-    assert data.BSPDataModule is loaders.BSPDataModule
-    assert data.normalize_hips_neck is loaders.normalize_hips_neck
-    assert set(loaders.__all__) <= set(dir(data))
+    import bsp_fast.data as data
+
+    assert data.ClipDataset.__module__ == "bsp_fast.data.datasets"
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("bsp_fast.loaders")
+
+
+def test_package_data_lives_in_resources():
+    from importlib import resources
+
+    from bsp_fast import skeleton
+
+    folder = resources.files("bsp_fast").joinpath("resources", "carla_skeleton")
+    assert folder.joinpath("structure.yaml").is_file()
+    assert skeleton.reference_pose(skeleton.model_name("adult", "female")).shape[0] == 26

@@ -88,7 +88,7 @@ def _unpack_batch(buffer, key, layout: dict, strings: dict) -> dict:
     if buffer is None:
         buffer = _mapped.get(key)
         if buffer is None:
-            raise RuntimeError(f"bsp_fast.loaders: batch buffer {key} of a DataLoader worker "
+            raise RuntimeError(f"bsp_fast.data: batch buffer {key} of a DataLoader worker "
                                "was never received by this process")
     elif key is not None:
         _remember(key, buffer)
