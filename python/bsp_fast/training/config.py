@@ -1,0 +1,358 @@
+"""Options of ``bsp-train``: one table drives the command line, ``--config run.yaml`` (safe
+YAML, same names with ``_`` or ``-``), the Python API (``bsp_fast.train(**options)``) and
+the resolved ``config.yaml`` every run writes back.
+
+Precedence: built-in defaults < the saved config of a ``--resume``d run < ``--config``
+YAML < options given on the command line (or as keywords).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["OPTIONS", "TASKS", "ConfigError", "defaults", "add_options", "read_yaml",
+           "normalise", "validate", "parse_hp", "write_yaml", "explicit_args"]
+
+TASKS = ("classification", "autoencoder", "lifting", "pose_estimation")
+ACCELERATORS = ("auto", "cpu", "gpu")
+STRATEGIES = ("auto", "ddp", "ddp_spawn", "ddp_find_unused_parameters_true")
+PRECISIONS = ("auto", "32", "64", "bf16-mixed", "16-mixed", "bf16-true")
+LOGGERS = ("csv", "tensorboard", "wandb")
+LIFTING_TARGETS = ("absolute", "world", "camera")
+
+
+class ConfigError(ValueError):
+    """A bad option value or an unknown option (exit code 2 on the command line)."""
+
+
+@dataclass(frozen=True)
+class Option:
+    name: str
+    kind: str          # int, float, str, bool, flag, mjp, hp, devices, path
+    default: object
+    help: str
+    group: str
+    choices: tuple = ()
+    minimum: float | None = None
+    metavar: str | None = None
+
+
+def _o(name, kind, default, help, group, **kw):
+    return Option(name, kind, default, help, group, **kw)
+
+
+OPTIONS: tuple = (
+    # ------------------------------------------------------------------ what to train
+    _o("task", "str", None, "task: " + ", ".join(TASKS), "run", choices=TASKS),
+    _o("model", "str", None, "registered model of the task (see the list below)", "run"),
+    _o("data", "path", None, "CARLA-BSP dataset directory (converted on first use, cached "
+       "beside data.csv) or a bsp-convert HDF5 file", "run", metavar="DATASET_OR_H5"),
+    _o("out", "path", None, "run directory (default runs/TASK-MODEL-YYYYmmdd-HHMMSS); written "
+       "under a temporary name and renamed when complete", "run", metavar="RUN_DIR"),
+    _o("force", "flag", False, "replace an existing run directory", "run"),
+    _o("resume", "path", None, "continue a run (its directory or a .ckpt) from its last "
+       "checkpoint; its saved config is the base, options given here override (e.g. a "
+       "larger --epochs). Without --out the run directory is updated in place", "run",
+       metavar="RUN_OR_CKPT"),
+    _o("seed", "int", 22742, "seed of weights, train-time noise/augmentation and batch order; "
+       "the same seed on the same data gives the same metrics on CPU", "run", minimum=0),
+    _o("quiet", "flag", False, "no progress bar and no tables on stdout", "run"),
+    # ------------------------------------------------------------------ data
+    _o("clip_length", "int", None, "frames per clip when converting (default 30; 16 with "
+       "--benchmark); checked against an existing HDF5 file", "data", minimum=1, metavar="L"),
+    _o("clip_offset", "int", None, "frames between consecutive train clips when converting "
+       "(default L; 6 with --benchmark)", "data", minimum=1, metavar="N"),
+    _o("eval_clip_offset", "int", None, "the same for val/test clips (default --clip-offset)",
+       "data", minimum=1, metavar="N"),
+    _o("benchmark", "flag", False, "the crossing benchmark's time-to-event windows (16 frames "
+       "every 6, video-level labels)", "data"),
+    _o("balance", "flag", False, "balance the train split's classes", "data"),
+    _o("label", "str", "last", "clip label when converting: last or any:F", "data",
+       metavar="last|any:F"),
+    _o("fov", "float", None, "camera field of view in degrees when converting (default: the "
+       "dataset's config.yaml, else 90)", "data", minimum=1e-6),
+    _o("crop_size", "int", 128, "side of the pedestrian crops when converting media "
+       "(pose_estimation)", "data", minimum=8, metavar="S"),
+    _o("split_seed", "int", 22742, "seed of the converter's recording split", "data",
+       minimum=0),
+    _o("noise", "float", 0.0, "Gaussian noise sigma in pixels on the 2D inputs (train, val "
+       "and test; val/test noise is fixed by the evaluation seed)", "data", minimum=0.0,
+       metavar="SIGMA"),
+    _o("mjp", "mjp", 0.0, "missing-joint probability of the 2D inputs: one value, or 26 "
+       "comma-separated values (one per joint)", "data", metavar="P[,P...]"),
+    _o("augment", "bool", True, "random flips and rotations of the train clips "
+       "(classification and autoencoder only)", "data"),
+    _o("lifting_target", "str", "absolute", "3D frame of the lifting targets", "data",
+       choices=LIFTING_TARGETS),
+    # ------------------------------------------------------------------ model
+    _o("hp", "hp", {}, "a model hyper-parameter, KEY=VALUE (repeatable; YAML value syntax); "
+       "checked against the model's hyper-parameters", "model", metavar="KEY=VALUE"),
+    _o("lr", "float", None, "learning rate (default: the model's, e.g. AdamW 1e-4)", "model",
+       minimum=0.0),
+    # ------------------------------------------------------------------ training
+    _o("epochs", "int", 30, "maximum number of epochs", "training", minimum=1),
+    _o("batch_size", "int", 256, "clips per batch (per process with DDP)", "training",
+       minimum=1),
+    _o("early_stop", "int", 0, "stop after this many epochs without a better val loss "
+       "(0: never)", "training", minimum=0, metavar="EPOCHS"),
+    _o("workers", "int", 0, "DataLoader worker processes per training process", "training",
+       minimum=0),
+    _o("accelerator", "str", "auto", "where to train", "training", choices=ACCELERATORS),
+    _o("devices", "devices", "auto", "number of devices (processes with DDP) or 'auto' or a "
+       "comma-separated list of GPU indices", "training"),
+    _o("strategy", "str", "auto", "Lightning strategy (ddp: one process per device; on CPU "
+       "through gloo)", "training", choices=STRATEGIES),
+    _o("precision", "str", "auto", "arithmetic precision; auto = bf16-mixed on GPUs that "
+       "support it, 32 on CPU (see docs/training.md for the measurements)", "training",
+       choices=PRECISIONS),
+    _o("limit_batches", "int", 0, "use at most this many batches of each split per epoch "
+       "(0: all; for smoke tests - metrics then cover part of a split)", "training",
+       minimum=0, metavar="N"),
+    _o("logger", "str", "csv", "CSV logs are always written; tensorboard or wandb (offline) "
+       "log as well when installed", "training", choices=LOGGERS),
+)
+BY_NAME = {o.name: o for o in OPTIONS}
+
+
+def defaults() -> dict:
+    """Every option at its built-in default."""
+    return {o.name: (dict(o.default) if isinstance(o.default, dict) else o.default)
+            for o in OPTIONS}
+
+
+# ---------------------------------------------------------------------- parsing values
+def _bool(value) -> bool:
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower()
+    if text in ("1", "true", "yes", "on"):
+        return True
+    if text in ("0", "false", "no", "off"):
+        return False
+    raise ConfigError(f"expected a boolean (true/false), got {value!r}")
+
+
+def _mjp(value):
+    if isinstance(value, str):
+        parts = [p for p in value.replace(" ", "").split(",") if p]
+        try:
+            value = [float(p) for p in parts]
+        except ValueError:
+            raise ConfigError(f"mjp must be a number or 26 comma-separated numbers, "
+                              f"got {value!r}") from None
+    if isinstance(value, (list, tuple)):
+        value = [float(v) for v in value]
+        if len(value) == 1:
+            value = value[0]
+        elif len(value) != 26:
+            raise ConfigError(f"mjp takes one value or 26 (one per joint), got {len(value)}")
+    if isinstance(value, bool) or not isinstance(value, (int, float, list)):
+        raise ConfigError(f"mjp must be a number or a list of 26 numbers, got {value!r}")
+    values = value if isinstance(value, list) else [value]
+    if any(not (0.0 <= float(v) <= 1.0) or math.isnan(float(v)) for v in values):
+        raise ConfigError(f"mjp values must lie in [0, 1], got {value!r}")
+    return value if isinstance(value, list) else float(value)
+
+
+def parse_hp(items) -> dict:
+    """``["hidden=32", "layers=1"]`` (or a dict) -> ``{"hidden": 32, "layers": 1}``; values
+    in YAML syntax (numbers, true/false, null, strings, [lists])."""
+    if items is None:
+        return {}
+    if isinstance(items, dict):
+        return {str(k).replace("-", "_"): v for k, v in items.items()}
+    import yaml
+
+    out = {}
+    for item in ([items] if isinstance(items, str) else items):
+        key, sep, text = str(item).partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--hp expects KEY=VALUE, got {item!r}")
+        try:
+            out[key.strip().replace("-", "_")] = yaml.safe_load(text) if text.strip() else ""
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"--hp {item!r}: value is not valid YAML ({exc})") from None
+    return out
+
+
+def _devices(value):
+    if isinstance(value, bool):
+        raise ConfigError(f"devices must be 'auto', a count or a list of indices, got {value!r}")
+    if isinstance(value, int):
+        if value < 1 and value != -1:
+            raise ConfigError(f"devices must be >= 1 (or -1 for all), got {value}")
+        return value
+    if isinstance(value, (list, tuple)):
+        return [int(v) for v in value]
+    text = str(value).strip()
+    if text == "auto":
+        return "auto"
+    try:
+        if "," in text:
+            return [int(v) for v in text.split(",") if v]
+        return _devices(int(text))
+    except ValueError:
+        raise ConfigError(f"devices must be 'auto', a count or a comma-separated list of "
+                          f"indices, got {value!r}") from None
+
+
+def _convert(opt: Option, value):
+    if value is None:
+        if opt.kind in ("flag", "bool"):
+            raise ConfigError(f"{opt.name} must be true or false, got null")
+        return None
+    kind = opt.kind
+    try:
+        if kind in ("flag", "bool"):
+            return _bool(value)
+        if kind == "mjp":
+            return _mjp(value)
+        if kind == "hp":
+            return parse_hp(value)
+        if kind == "devices":
+            return _devices(value)
+        if kind == "int":
+            if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+                raise ValueError
+            value = int(value)
+        elif kind == "float":
+            if isinstance(value, bool):
+                raise ValueError
+            value = float(value)
+            if not math.isfinite(value):
+                raise ValueError
+        elif kind in ("str", "path"):
+            if isinstance(value, (dict, list, bool)):
+                raise ValueError
+            value = str(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{opt.name} expects {'an integer' if kind == 'int' else 'a number' if kind == 'float' else 'a string'}, "
+                          f"got {value!r}") from None
+    if opt.choices and value not in opt.choices:
+        raise ConfigError(f"{opt.name} must be one of {list(opt.choices)}, got {value!r}")
+    if opt.minimum is not None and value < opt.minimum:
+        raise ConfigError(f"{opt.name} must be >= {opt.minimum}, got {value!r}")
+    return value
+
+
+def normalise(values: dict, source: str = "options") -> dict:
+    """Known option names (``-`` or ``_``) with converted values; unknown names are a
+    :class:`ConfigError` listing the allowed ones."""
+    out = {}
+    for key, value in values.items():
+        name = str(key).replace("-", "_")
+        if name not in BY_NAME:
+            raise ConfigError(f"{source}: unknown option {key!r}; allowed: "
+                              + ", ".join(o.name for o in OPTIONS))
+        out[name] = _convert(BY_NAME[name], value)
+    return out
+
+
+def validate(cfg: dict) -> dict:
+    """Cross-option checks on a complete config (task, model and hyper-parameters against
+    the model registry). Returns the config with the model's full hyper-parameters."""
+    cfg = dict(cfg)
+    if cfg.get("task") is None:
+        raise ConfigError("no task given; allowed: " + ", ".join(TASKS))
+    if cfg.get("model") is None:
+        raise ConfigError(f"no model given for task {cfg['task']!r}; allowed: "
+                          + ", ".join(_models(cfg["task"])))
+    if cfg.get("data") is None:
+        raise ConfigError("no data given (--data DATASET_DIR or clips.h5)")
+    if cfg["label"] != "last" and not cfg["label"].startswith("any:"):
+        raise ConfigError(f"label must be 'last' or 'any:F', got {cfg['label']!r}")
+    if cfg["task"] == "pose_estimation" and (cfg["noise"] or cfg["mjp"]):
+        raise ConfigError("noise/mjp deform 2D joint inputs; pose_estimation reads images")
+    from .. import models
+
+    names = models.available(cfg["task"])
+    if cfg["model"] not in names:
+        raise ConfigError(f"unknown model {cfg['model']!r} for task {cfg['task']!r}; "
+                          f"allowed: {', '.join(names)}")
+    allowed = models.hparams_of(cfg["task"], cfg["model"])
+    unknown = sorted(set(cfg["hp"]) - set(allowed))
+    if unknown:
+        raise ConfigError(f"model {cfg['model']!r} has no hyper-parameter(s) {unknown}; "
+                          f"allowed: {', '.join(f'{k}={v!r}' for k, v in allowed.items())}")
+    return cfg
+
+
+def _models(task: str) -> list:
+    try:
+        from .. import models
+
+        return list(models.available(task))
+    except Exception:  # pragma: no cover - only for the message
+        return []
+
+
+# ---------------------------------------------------------------------- YAML
+def read_yaml(path) -> dict:
+    """A run config (``--config``): a mapping of option names, safe YAML only."""
+    import yaml
+
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"--config {p}: no such file")
+    try:
+        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"--config {p}: not valid YAML ({exc})") from None
+    if doc is None:
+        return {}
+    if not isinstance(doc, dict):
+        raise ConfigError(f"--config {p}: expected a mapping of option: value")
+    doc = {k: v for k, v in doc.items() if k not in ("resolved", "versions")}
+    return normalise(doc, f"--config {p}")
+
+
+def write_yaml(cfg: dict, path, extra: dict | None = None) -> None:
+    """The resolved config: every option in table order, then ``extra`` (what the run
+    resolved: precision, data file, model hyper-parameters, versions)."""
+    import yaml
+
+    doc = {o.name: cfg.get(o.name) for o in OPTIONS}
+    doc.update(extra or {})
+    text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+    Path(path).write_text("# bsp-train resolved config (usable as --config)\n" + text,
+                          encoding="utf-8")
+
+
+# ---------------------------------------------------------------------- argparse
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """Adds every option; values not given stay absent (``explicit_args``)."""
+    S = argparse.SUPPRESS
+    parser.add_argument("task", nargs="?", default=S, metavar="TASK", help=BY_NAME["task"].help)
+    parser.add_argument("model", nargs="?", default=S, metavar="MODEL",
+                        help=BY_NAME["model"].help)
+    parser.add_argument("--config", default=S, metavar="RUN.yaml",
+                        help="read options from a YAML file (any option below, by name); "
+                             "options on the command line override it")
+    titles = {"run": "run", "data": "data (converter and loader options)",
+              "model": "model", "training": "training"}
+    groups = {g: parser.add_argument_group(t) for g, t in titles.items()}
+    for o in OPTIONS:
+        if o.name in ("task", "model"):
+            continue
+        flag = "--" + o.name.replace("_", "-")
+        default = o.default if not isinstance(o.default, dict) else "{}"
+        text = o.help + (f" (default: {default})" if default not in (None, False, "{}") else "")
+        g = groups[o.group]
+        if o.kind == "flag":
+            g.add_argument(flag, action="store_const", const=True, default=S, help=text)
+        elif o.kind == "bool":
+            g.add_argument(flag, action=argparse.BooleanOptionalAction, default=S, help=text)
+        elif o.kind == "hp":
+            g.add_argument(flag, action="append", default=S, metavar=o.metavar, help=text)
+        else:
+            g.add_argument(flag, default=S, metavar=o.metavar or o.name.upper(),
+                           help=text + (f"; one of {', '.join(o.choices)}" if o.choices
+                                        and o.name != "task" else ""))
+
+
+def explicit_args(ns: argparse.Namespace) -> dict:
+    """The options actually given on the command line, converted."""
+    given = {k: v for k, v in vars(ns).items() if k != "config"}
+    return normalise(given, "command line")

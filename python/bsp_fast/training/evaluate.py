@@ -1,0 +1,166 @@
+"""``bsp-eval RUN_OR_CKPT``: re-evaluate a checkpoint; ``bsp-eval --table RUN...``: runs
+side by side in the layout of the report's tables.
+
+Python: ``bsp_fast.evaluate("runs/lifting-martinez", split="test")`` -> :class:`EvalResult`.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from . import config as C
+from .runs import RunError, resolve_checkpoint, write_json
+
+__all__ = ["evaluate", "main", "EvalResult", "load_run"]
+
+SPLIT_STAGES = {"test": "test", "val": "validate"}
+
+
+@dataclass
+class EvalResult:
+    """``metrics``: the split's metrics (mm for 3D) under the run's data settings unless
+    overridden; ``config``: the settings used."""
+    task: str
+    model: str
+    split: str
+    metrics: dict
+    checkpoint: Path
+    config: dict
+
+
+def load_run(run, which: str = "best", data=None, **overrides):
+    """``(module, cfg, ckpt, h5)`` of a run directory or checkpoint: the rebuilt module, its
+    saved config with ``overrides`` (bsp-train option names) applied, and the data to read
+    (``data``, else the HDF5 file the run used if it still exists, else its ``data``)."""
+    from .tasks import checkpoint_info, load_module
+
+    if which not in ("best", "last"):
+        raise ValueError(f"which must be one of ['best', 'last'], got {which!r}")
+    ckpt, run_dir = resolve_checkpoint(run, which)
+    try:
+        info = checkpoint_info(ckpt)
+    except ValueError as exc:
+        raise RunError(str(exc)) from None
+    cfg = C.defaults()
+    saved = {k: v for k, v in (info.get("config") or {}).items() if k in C.BY_NAME}
+    cfg.update(C.normalise(saved, f"{ckpt} (saved config)"))
+    cfg.update(C.normalise({k: v for k, v in overrides.items() if v is not None}))
+    h5 = None
+    if data is not None:
+        cfg["data"] = str(data)
+    elif run_dir is not None:
+        import yaml
+
+        doc = yaml.safe_load((run_dir / "config.yaml").read_text(encoding="utf-8")) or {}
+        used = (doc.get("resolved") or {}).get("h5")
+        if used and Path(used).is_file():
+            h5 = used
+    if cfg.get("data") is None and h5 is None:
+        raise RunError(f"{ckpt}: the checkpoint names no data; pass --data")
+    module = load_module(ckpt)
+    module.eval()
+    return module, cfg, ckpt, h5
+
+
+def evaluate(run, split: str = "test", data=None, *, which: str = "best",
+             batch_size: int | None = None, workers: int | None = None,
+             accelerator: str | None = None, noise: float | None = None, mjp=None,
+             limit_batches: int | None = None, quiet: bool = True) -> EvalResult:
+    """Scores the ``which`` checkpoint (best or last) of run directory or checkpoint
+    ``run`` on ``split`` (test or val) with the run's data settings (same batch size, so
+    the same fixed evaluation noise), any of them overridable; reproduces the run's
+    ``metrics.json``."""
+    if split not in SPLIT_STAGES:
+        raise ValueError(f"split must be one of {list(SPLIT_STAGES)}, got {split!r}")
+    from .train import make_datamodule, make_trainer, prepare_data, resolve_precision
+
+    module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size, workers=workers,
+                                     accelerator=accelerator, noise=noise, mjp=mjp,
+                                     limit_batches=limit_batches, quiet=quiet)
+    dm = make_datamodule(cfg, h5)
+    prepare_data(dm, stages=(SPLIT_STAGES[split],))
+    precision = resolve_precision(cfg["precision"], cfg["accelerator"])
+    trainer = make_trainer(cfg, None, precision, fit=False)
+    if split == "test":
+        out = trainer.test(module, datamodule=dm, verbose=False)
+    else:
+        out = trainer.validate(module, datamodule=dm, verbose=False)
+    prefix = f"{split}/"
+    metrics = {k[len(prefix):]: float(v) for k, v in (out[0] if out else {}).items()
+               if k.startswith(prefix)}
+    return EvalResult(task=module.task, model=module.hparams["model"], split=split,
+                      metrics=metrics, checkpoint=Path(ckpt), config=cfg)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="bsp-eval",
+        description="Re-evaluate a bsp-train checkpoint (bsp-eval RUN_OR_CKPT), or print "
+                    "runs side by side in the report's table layout (bsp-eval --table "
+                    "RUN...), with the initial-metrics row of the trivial baseline.",
+        epilog="exit codes: 0 success, 1 bad data/run/checkpoint, 2 bad arguments. "
+               "docs: docs/training.md", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("runs", nargs="+", metavar="RUN_OR_CKPT",
+                   help="a run directory or .ckpt (several with --table)")
+    p.add_argument("--table", action="store_true",
+                   help="print the runs' saved metrics side by side (one table per task)")
+    p.add_argument("--format", default="markdown", choices=("markdown", "csv"),
+                   help="table format")
+    p.add_argument("--split", default="test", choices=tuple(SPLIT_STAGES),
+                   help="split to evaluate (tables: val = the best epoch's val metrics)")
+    p.add_argument("--which", default="best", choices=("best", "last"),
+                   help="checkpoint of a run directory")
+    p.add_argument("--data", default=None, metavar="DATASET_OR_H5",
+                   help="data to evaluate on (default: the run's HDF5 file or dataset)")
+    p.add_argument("--batch-size", type=int, default=None,
+                   help="clips per batch (default: the run's; the fixed evaluation noise "
+                        "depends on it)")
+    p.add_argument("--workers", type=int, default=None, help="DataLoader worker processes")
+    p.add_argument("--accelerator", default=None, choices=C.ACCELERATORS,
+                   help="where to run (default: the run's)")
+    p.add_argument("--noise", type=float, default=None, metavar="SIGMA",
+                   help="override the run's input noise (pixels)")
+    p.add_argument("--mjp", default=None, metavar="P[,P...]",
+                   help="override the run's missing-joint probability (1 or 26 values)")
+    p.add_argument("--limit-batches", type=int, default=None, metavar="N",
+                   help="evaluate at most N batches (default: the run's setting)")
+    p.add_argument("--json", default=None, metavar="FILE", help="also write the metrics here")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    try:
+        if args.table:
+            from .tables import runs_table
+
+            print(runs_table(args.runs, args.format, args.split))
+            return 0
+        if len(args.runs) != 1:
+            raise C.ConfigError("evaluate one run or checkpoint at a time (or use --table)")
+        res = evaluate(args.runs[0], args.split, args.data, which=args.which,
+                       batch_size=args.batch_size, workers=args.workers,
+                       accelerator=args.accelerator, noise=args.noise, mjp=args.mjp,
+                       limit_batches=args.limit_batches, quiet=args.quiet)
+    except (C.ConfigError, ValueError) as exc:
+        print(f"bsp-eval: {exc}", file=sys.stderr)
+        return 2
+    except RunError as exc:
+        print(f"bsp-eval: {exc}", file=sys.stderr)
+        return exc.code
+    doc = {"task": res.task, "model": res.model, "split": res.split,
+           "checkpoint": str(res.checkpoint), args.split: res.metrics}
+    if args.json:
+        write_json(doc, args.json)
+    print(f"{res.task} / {res.model}: {res.split} metrics of {res.checkpoint}")
+    for key, value in res.metrics.items():
+        print(f"  {key:14s} {value:.6g}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

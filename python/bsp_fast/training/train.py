@@ -1,0 +1,391 @@
+"""``bsp-train TASK MODEL --data DATASET``: train a baseline, test it, write a run directory.
+
+Python: ``bsp_fast.train("lifting", "martinez", data="clips.h5", epochs=30)`` returns a
+:class:`TrainResult`. See docs/training.md.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from . import config as C
+from .runs import ENV_TMP, RunDirectory, RunError, default_run_dir, read_run, \
+    resolve_checkpoint, write_json
+
+__all__ = ["train", "main", "TrainResult"]
+
+
+@dataclass
+class TrainResult:
+    """What a run produced. ``metrics``: test metrics (mm for 3D); ``initial``: the trivial
+    baseline's metrics on val and test; ``val``: val metrics of the best epoch."""
+    run_dir: Path
+    metrics: dict
+    val: dict
+    initial: dict
+    best_checkpoint: Path
+    last_checkpoint: Path
+    best_epoch: int | None
+    epochs: int
+    config: dict
+    seconds: dict = field(default_factory=dict)
+
+
+# ---------------------------------------------------------------------- config
+def resolve_config(cli: dict, config_path=None) -> tuple:
+    """defaults < resumed run's config < --config YAML < explicit options ->
+    ``(cfg, resume)`` with ``resume`` = ``{"ckpt", "run_dir"}`` or None."""
+    from_yaml = C.read_yaml(config_path) if config_path else {}
+    cfg = C.defaults()
+    resume = None
+    target = cli.get("resume", from_yaml.get("resume"))
+    if target:
+        ckpt, run_dir = resolve_checkpoint(target, "last")
+        if run_dir is not None:
+            saved = read_run(run_dir)["config"]
+        else:
+            from .tasks import checkpoint_info
+
+            saved = checkpoint_info(ckpt).get("config") or {}
+        known = {k: v for k, v in saved.items() if k in C.BY_NAME
+                 and k not in ("resume", "force", "out", "quiet")}
+        cfg.update(C.normalise(known, f"{target} (saved config)"))
+        resume = {"ckpt": Path(ckpt), "run_dir": run_dir}
+        for key in ("task", "model"):
+            want = cli.get(key, from_yaml.get(key))
+            if want is not None and want != saved.get(key):
+                raise C.ConfigError(f"--resume {target} is a {saved.get('task')!r} run of "
+                                    f"model {saved.get('model')!r}; it cannot continue as "
+                                    f"{key} {want!r}")
+        if cli.get("out") is None and from_yaml.get("out") is None and run_dir is not None:
+            cfg["out"] = str(run_dir)
+    cfg.update(from_yaml)
+    cfg.update(cli)
+    cfg = C.validate(cfg)
+    if cfg["out"] is None:
+        cfg["out"] = str(default_run_dir(cfg["task"], cfg["model"]))
+    return cfg, resume
+
+
+def _rank() -> int:
+    for key in ("RANK", "LOCAL_RANK", "SLURM_PROCID"):
+        if os.environ.get(key, "").isdigit():
+            return int(os.environ[key])
+    return 0
+
+
+# ---------------------------------------------------------------------- data
+def make_datamodule(cfg: dict, h5=None):
+    """The ``BSPDataModule`` of a config (``h5``: an existing file to use instead)."""
+    from ..data import BSPDataModule
+
+    data = Path(h5 or cfg["data"])
+    if not data.exists():
+        raise RunError(f"{data}: no such dataset directory or HDF5 file")
+    if data.is_dir() or data.name == "data.csv":
+        paths = dict(dataset_dir=data if data.is_dir() else data.parent)
+    else:
+        paths = dict(h5_path=data)
+    convert = dict(label=cfg["label"], crop_size=cfg["crop_size"], seed=cfg["split_seed"])
+    for key in ("fov", "eval_clip_offset"):
+        if cfg[key] is not None:
+            convert[key] = cfg[key]
+    dataset_options = {}
+    if cfg["task"] == "lifting":
+        dataset_options["lifting_target"] = cfg["lifting_target"]
+    augment = cfg["augment"] and cfg["task"] in ("classification", "autoencoder")
+    return BSPDataModule(**paths, task=cfg["task"], clip_length=cfg["clip_length"],
+                         clip_offset=cfg["clip_offset"], benchmark=cfg["benchmark"],
+                         balance=cfg["balance"], noise=cfg["noise"], mjp=cfg["mjp"],
+                         batch_size=cfg["batch_size"], num_workers=cfg["workers"],
+                         augment=augment, seed=cfg["seed"], sampler_seed=cfg["seed"],
+                         convert_options=convert, dataset_options=dataset_options)
+
+
+def prepare_data(dm, stages=("fit", "test"), convert: bool = True) -> None:
+    """Converts (when needed) and opens the splits; any problem with the data becomes a
+    :class:`RunError` naming the file."""
+    try:
+        if convert:
+            dm.prepare_data()
+        for stage in stages:
+            dm.setup(stage)
+    except (ValueError, OSError, KeyError) as exc:
+        raise RunError(f"data: {exc}") from None
+    except Exception as exc:  # the C++ converter's typed errors
+        if type(exc).__module__.startswith("bsp_fast"):
+            raise RunError(f"data: {type(exc).__name__}: {exc}") from None
+        raise
+    for split, ds in dm.datasets.items():
+        if len(ds) == 0:
+            raise RunError(f"data: {dm.h5_path}: split {split!r} holds no clips")
+
+
+# ---------------------------------------------------------------------- trainer
+def resolve_precision(precision: str, accelerator: str) -> str:
+    """``auto`` -> bf16-mixed on a GPU that supports it, else 32 (CPU: see docs)."""
+    if precision != "auto":
+        return precision
+    import torch
+
+    gpu = accelerator == "gpu" or (accelerator == "auto" and torch.cuda.is_available())
+    if gpu and torch.cuda.is_available() and torch.cuda.is_bf16_supported():
+        return "bf16-mixed"
+    return "32"
+
+
+def _extra_logger(kind: str, tmp: Path, name: str):
+    import importlib.util
+
+    if kind == "csv":
+        return None
+    if kind == "tensorboard":
+        if not any(importlib.util.find_spec(m) for m in ("tensorboard", "tensorboardX")):
+            raise C.ConfigError("--logger tensorboard needs the tensorboard package "
+                                "(pip install tensorboard)")
+        from lightning.pytorch.loggers import TensorBoardLogger
+
+        return TensorBoardLogger(save_dir=str(tmp), name="tensorboard", default_hp_metric=False)
+    if importlib.util.find_spec("wandb") is None:
+        raise C.ConfigError("--logger wandb needs the wandb package (pip install wandb)")
+    from lightning.pytorch.loggers import WandbLogger
+
+    return WandbLogger(save_dir=str(tmp), name=name, project="bsp_fast", offline=True)
+
+
+def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = True):
+    """The Lightning Trainer of a run (``tmp``: run directory being written) or, with
+    ``fit=False``, an evaluation-only one (no logger, no checkpoints)."""
+    import warnings
+
+    import lightning.pytorch as pl
+
+    from .checkpointing import RunCheckpoint
+
+    warnings.filterwarnings("ignore", message=r".*does not have many workers.*")
+    warnings.filterwarnings("ignore", message=r".*number of training batches.*")
+    limit = cfg["limit_batches"] or None
+    common = dict(accelerator=cfg["accelerator"], precision=precision,
+                  enable_progress_bar=not cfg["quiet"], enable_model_summary=False,
+                  deterministic=True, num_sanity_val_steps=0, use_distributed_sampler=False,
+                  limit_train_batches=limit, limit_val_batches=limit, limit_test_batches=limit)
+    try:
+        if not fit:
+            return pl.Trainer(devices=1, logger=False, enable_checkpointing=False, **common)
+        from lightning.pytorch.loggers import CSVLogger
+
+        loggers = [CSVLogger(save_dir=str(tmp), name="logs")]
+        extra = _extra_logger(cfg["logger"], tmp, Path(cfg["out"]).name)
+        loggers += [extra] if extra is not None else []
+        callbacks = [RunCheckpoint(dirpath=str(tmp / "checkpoints"), filename="best",
+                                   monitor="val/loss", mode="min", save_top_k=1,
+                                   save_last=True, enable_version_counter=False)]
+        if cfg["early_stop"]:
+            from lightning.pytorch.callbacks import EarlyStopping
+
+            callbacks.append(EarlyStopping(monitor="val/loss", mode="min",
+                                           patience=cfg["early_stop"]))
+        return pl.Trainer(devices=cfg["devices"], strategy=cfg["strategy"],
+                          max_epochs=cfg["epochs"], logger=loggers, callbacks=callbacks,
+                          default_root_dir=str(tmp), log_every_n_steps=50, **common)
+    except C.ConfigError:
+        raise
+    except Exception as exc:  # e.g. --accelerator gpu without a GPU
+        raise C.ConfigError(f"cannot set up training ({type(exc).__name__}: {exc})") from None
+
+
+# ---------------------------------------------------------------------- the run
+def _train(cli: dict, config_path=None) -> TrainResult | None:
+    cfg, resume = resolve_config(cli, config_path)
+    import lightning.pytorch as pl
+    import torch
+
+    from .tasks import TASK_MODULES
+
+    child = bool(os.environ.get(ENV_TMP)) and _rank() > 0  # a DDP process Lightning started
+    precision = resolve_precision(cfg["precision"], cfg["accelerator"])
+    dm = make_datamodule(cfg)
+    prepare_data(dm, convert=not child)
+    pl.seed_everything(cfg["seed"], workers=True, verbose=False)
+    try:
+        module = TASK_MODULES[cfg["task"]](cfg["model"], hparams=cfg["hp"], lr=cfg["lr"],
+                                           config=cfg)
+    except (ValueError, TypeError) as exc:
+        raise C.ConfigError(f"model {cfg['model']!r}: {exc}") from None
+    ckpt_path = None
+    if resume is not None:
+        ckpt_path = resume["ckpt"]
+    if child:
+        tmp = Path(os.environ[ENV_TMP])
+        trainer = make_trainer(cfg, tmp, precision)
+        if resume is not None and resume["run_dir"] is not None:
+            ckpt_path = tmp / "checkpoints" / "last.ckpt"
+        trainer.fit(module, datamodule=dm, ckpt_path=ckpt_path)
+        trainer.test(module, datamodule=dm, ckpt_path="best", verbose=False)
+        return None
+    final = Path(cfg["out"])
+    copy_from = resume["run_dir"] if resume is not None else None
+    with RunDirectory(final, force=cfg["force"], copy_from=copy_from) as tmp:
+        if copy_from is not None:
+            ckpt_path = tmp / "checkpoints" / "last.ckpt"
+        trainer = make_trainer(cfg, tmp, precision)
+        seconds = {}
+        t0 = time.perf_counter()
+        previous = read_run(copy_from)["metrics"] if copy_from is not None else None
+        if previous and previous.get("initial"):
+            initial = previous["initial"]
+        else:
+            initial = _initial(cfg, dm)
+        seconds["initial"] = time.perf_counter() - t0
+        _log_initial(trainer, initial, cfg["quiet"])
+        pl.seed_everything(cfg["seed"], workers=True, verbose=False)
+        os.environ[ENV_TMP] = str(tmp)
+        try:
+            t0 = time.perf_counter()
+            trainer.fit(module, datamodule=dm, ckpt_path=ckpt_path)
+            seconds["fit"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            tested = trainer.test(module, datamodule=dm, ckpt_path="best", verbose=False)
+            seconds["test"] = time.perf_counter() - t0
+        finally:
+            os.environ.pop(ENV_TMP, None)
+        result = _finish(cfg, tmp, final, trainer, tested, initial, precision, seconds)
+    return result
+
+
+def _initial(cfg: dict, dm) -> dict:
+    from .tasks import initial_metrics
+
+    loaders = {"val": dm.val_dataloader(), "test": dm.test_dataloader()}
+    return initial_metrics(cfg["task"], dm.train_dataloader(), loaders,
+                           limit=cfg["limit_batches"])
+
+
+def _log_initial(trainer, initial: dict, quiet: bool) -> None:
+    values = {f"initial/{split}/{k}": v for split in ("val", "test")
+              for k, v in initial.get(split, {}).items() if v is not None}
+    for logger in trainer.loggers:
+        logger.log_metrics(values, step=0)
+        logger.save()
+    if not quiet:
+        print(f"initial metrics ({initial['baseline']}, before training):")
+        for split in ("val", "test"):
+            row = ", ".join(f"{k} {v:.4g}" for k, v in initial.get(split, {}).items()
+                            if v is not None)
+            print(f"  {split}: {row}")
+
+
+def _finish(cfg, tmp: Path, final: Path, trainer, tested, initial, precision, seconds):
+    from .. import __version__
+    from .curves import plot_curves, read_logs
+    from .scoring import UNITS
+
+    test = {k.split("/", 1)[1]: float(v) for k, v in (tested[0] if tested else {}).items()
+            if k.startswith("test/")}
+    logs = read_logs(tmp)
+    val_loss = logs.get("val/loss", {})
+    best_epoch = min(val_loss, key=val_loss.get) if val_loss else None
+    val = {k.split("/", 1)[1]: s[best_epoch] for k, s in logs.items()
+           if k.startswith("val/") and best_epoch in s} if best_epoch is not None else {}
+    epochs = int(trainer.current_epoch)
+    module = trainer.lightning_module
+    metrics = {"task": cfg["task"], "model": cfg["model"],
+               "hparams": module.hparams["hparams"], "test": test, "val": val,
+               "initial": initial, "best_epoch": None if best_epoch is None else best_epoch + 1,
+               "epochs": epochs, "best_checkpoint": "checkpoints/best.ckpt",
+               "units": {k: UNITS[k] for k in test if k in UNITS}, "precision": precision,
+               "world_size": int(trainer.world_size), "seconds": seconds}
+    write_json(metrics, tmp / "metrics.json")
+    import lightning
+    import torch
+
+    extra = {"resolved": {"precision": precision, "h5": str(Path(trainer.datamodule.h5_path).absolute()),
+                          "hparams": metrics["hparams"], "world_size": metrics["world_size"]},
+             "versions": {"bsp_fast": __version__, "torch": torch.__version__,
+                          "lightning": lightning.__version__}}
+    C.write_yaml(cfg, tmp / "config.yaml", extra)
+    plot_curves(tmp, cfg["task"], initial=initial.get("val"),
+                title=f"{cfg['task']} / {cfg['model']}")
+    return TrainResult(run_dir=final, metrics=test, val=val, initial=initial,
+                       best_checkpoint=final / "checkpoints" / "best.ckpt",
+                       last_checkpoint=final / "checkpoints" / "last.ckpt",
+                       best_epoch=metrics["best_epoch"], epochs=epochs, config=cfg,
+                       seconds=seconds)
+
+
+def train(task: str | None = None, model: str | None = None, data=None, out=None, *,
+          config=None, **options) -> TrainResult:
+    """Trains ``model`` on ``task`` with the data at ``data`` (dataset directory or HDF5
+    file) and writes the run directory ``out``. ``options`` are those of ``bsp-train``
+    with underscores (``epochs=2, batch_size=64, hp={"hidden": 32}, noise=5.0``);
+    ``config`` a YAML file of options. Raises ``ValueError`` for bad options,
+    :class:`~bsp_fast.training.runs.RunError` for unusable data or run directories."""
+    given = {k: v for k, v in dict(task=task, model=model, data=data, out=out).items()
+             if v is not None}
+    given.update(options)
+    result = _train(C.normalise(given), config)
+    if result is None:
+        raise RuntimeError("train() ran as a secondary DDP process")
+    return result
+
+
+# ---------------------------------------------------------------------- CLI
+def _epilog() -> str:
+    lines = ["tasks and models:"]
+    try:
+        from .. import models
+
+        for task in C.TASKS:
+            lines.append(f"  {task}:")
+            for name, text in models.available(task).items():
+                lines.append(f"    {name:24s} {text}")
+    except Exception as exc:  # pragma: no cover - models not importable
+        lines.append(f"  (model list unavailable: {exc})")
+    lines += ["", "exit codes: 0 success, 1 bad data or failure, 2 bad arguments, 3 run "
+              "directory exists (use --force), 130 interrupted",
+              "docs: docs/training.md"]
+    return "\n".join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="bsp-train",
+        description="Train a baseline of the CARLA-BSP report on one task, test its best "
+                    "checkpoint (lowest val loss) and write a run directory: config.yaml, "
+                    "metrics.json, curves.png, checkpoints/, logs/.",
+        epilog=_epilog(), formatter_class=argparse.RawDescriptionHelpFormatter)
+    C.add_options(p)
+    return p
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ns = build_parser().parse_args(argv)
+    try:
+        cli = C.explicit_args(ns)
+        result = _train(cli, getattr(ns, "config", None))
+    except C.ConfigError as exc:
+        print(f"bsp-train: {exc}", file=sys.stderr)
+        return 2
+    except RunError as exc:
+        print(f"bsp-train: {exc}", file=sys.stderr)
+        return exc.code
+    except KeyboardInterrupt:
+        print("bsp-train: interrupted; nothing written", file=sys.stderr)
+        return 130
+    if result is None:  # a DDP process started by Lightning
+        return 0
+    if not cli.get("quiet") and not result.config.get("quiet"):
+        from .tables import runs_table
+
+        print(runs_table([result.run_dir]))
+        print(f"wrote {result.run_dir}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
