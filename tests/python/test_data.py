@@ -51,7 +51,7 @@ EXPECTED = {
 def test_shapes_and_dtypes_per_task(h5file, task):
     ds = ClipDataset(h5file, "val", task)
     assert len(ds) == stored(h5file, "val", "labels").shape[0]
-    batch = ds.__getitems__([0, 1, 2])
+    batch = ds[[0, 1, 2]]
     for key, (shape, dtype) in EXPECTED[task].items():
         assert tuple(batch[key].shape) == (3,) + shape, key
         assert batch[key].dtype == dtype, key
@@ -246,7 +246,7 @@ def test_worker_batches_equal_in_process_batches(h5file, task):
     kw = dict(noise=5.0, mjp=0.2) if task == "lifting" else dict(with_mask=True)
     ds = ClipDataset(h5file, "val", task, **kw)
     for batch in ds.loader(batch_size=5, num_workers=2):
-        ref = ds.__getitems__(batch["meta"]["index"].tolist())
+        ref = ds[batch["meta"]["index"].tolist()]
         assert type(batch) is dict and set(batch) == set(ref)
         for key in ref:
             if key == "meta":
@@ -273,7 +273,7 @@ def test_worker_ring_buffers_are_reused_across_many_batches(h5file):
     loader = ds.loader(batch_size=1, num_workers=2)  # 12 batches per worker > RING_SLOTS
     for _ in range(2):
         for batch in loader:
-            ref = ds.__getitems__(batch["meta"]["index"].tolist())
+            ref = ds[batch["meta"]["index"].tolist()]
             assert all(torch.equal(batch[k], ref[k]) for k in ref if k != "meta")
     assert 0 < len(transport._mapped) <= 2 * transport.RING_SLOTS
 

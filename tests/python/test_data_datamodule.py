@@ -81,7 +81,7 @@ def test_lightning_fit_runs_and_reshuffles_per_epoch(h5file):
     trainer.fit(probe, datamodule=dm)
     n = len(dm.datasets["train"])
     assert [sorted(o) for o in probe.orders] == [list(range(n))] * 2
-    sampler = dm.train_dataloader().batch_sampler
+    sampler = dm.train_dataloader().sampler
     assert probe.orders == [sampler.order(0).tolist(), sampler.order(1).tolist()]
 
 

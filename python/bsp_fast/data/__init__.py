@@ -28,7 +28,8 @@ from .transforms import (
 )
 
 __all__ = [
-    "ClipDataset", "BSPDataModule", "ContiguousBatchSampler", "IndexBatch", "collate_batch",
+    "ClipDataset", "FrameDataset", "BSPDataModule", "ContiguousBatchSampler", "IndexBatch",
+    "collate_batch", "ImageAugment", "to_float_images",
     "TASKS", "SPLITS", "LIFTING_TARGETS", "DEFAULT_EVAL_SEED",
     "Compose", "Deform", "GaussianNoise", "MissingJoints", "HorizontalFlip", "RandomRotation",
     "RandomFlipRotate", "HipsNeckNormalize", "HipsNeckDenormalize", "NormalizedPose",
@@ -41,6 +42,7 @@ __all__ = [
 _LAZY = {"ContiguousBatchSampler": "sampling", "IndexBatch": "sampling",
          "collate_batch": "sampling", "ClipDataset": "datasets", "TASKS": "datasets",
          "SPLITS": "datasets", "LIFTING_TARGETS": "datasets", "DEFAULT_EVAL_SEED": "datasets",
+         "FrameDataset": "frames", "ImageAugment": "images", "to_float_images": "images",
          "BSPDataModule": "datamodule"}
 
 

@@ -1,0 +1,125 @@
+"""Pedestrian crops for pose estimation: float conversion with mean/std, and augmentation
+that moves the joints with the pixels.
+
+Crops are ``(..., S, S, 3)`` uint8 as stored (channels last); joints are ``(..., 26, 2)``
+in crop pixels (pixel ``i`` covers ``[i, i + 1)``, so a horizontal flip maps ``u`` to
+``S - u``). Everything runs in torch on whole batches.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from .. import skeleton as _sk
+
+__all__ = ["IMAGE_DTYPES", "ImageAugment", "to_float_images", "check_image_options"]
+
+IMAGE_DTYPES = ("uint8", "float32")
+_FLIP = np.asarray(_sk.FLIP_PERMUTATION, dtype=np.intp)
+_GREY = (0.299, 0.587, 0.114)
+
+
+def check_image_options(image_dtype: str, mean, std) -> tuple:
+    """Validates the image options; returns ``(dtype, mean, std)`` with mean/std as
+    (3,) float32 arrays or None. Giving mean/std implies ``float32``."""
+    if image_dtype not in IMAGE_DTYPES:
+        raise ValueError(f"image_dtype must be one of {list(IMAGE_DTYPES)}, got {image_dtype!r}")
+    if (mean is None) != (std is None):
+        raise ValueError("mean and std go together (per channel, on the [0, 1] scale)")
+    if mean is None:
+        return image_dtype, None, None
+    m = np.broadcast_to(np.asarray(mean, np.float32), (3,)).copy()
+    s = np.broadcast_to(np.asarray(std, np.float32), (3,)).copy()
+    if not (np.all(np.isfinite(m)) and np.all(s > 0)):
+        raise ValueError(f"mean must be finite and std positive, got {mean!r}, {std!r}")
+    return "float32", m, s
+
+
+def to_float_images(rgb, channels_last: bool, mean=None, std=None) -> np.ndarray:
+    """uint8 crops -> float32 channels-first ``(..., 3, S, S)`` on [0, 1], then
+    ``(x - mean) / std`` per channel when given."""
+    t = torch.as_tensor(rgb)
+    if channels_last:
+        t = t.movedim(-1, -3)
+    x = t.to(torch.float32).div_(255.0)
+    if mean is not None:
+        m = torch.from_numpy(np.asarray(mean, np.float32)).view(3, 1, 1)
+        s = torch.from_numpy(np.asarray(std, np.float32)).view(3, 1, 1)
+        x = x.sub_(m).div_(s)
+    return x.contiguous().numpy()
+
+
+class ImageAugment:
+    """Random flip, scale, shift and colour jitter of crops, with the joints moved along.
+
+    Per clip (all frames alike): a horizontal flip with probability ``flip_p`` (pixels
+    mirrored, ``u -> S - u``, joints permuted left/right, visibility with them); a zoom by
+    a factor uniform in ``[1 - scale, 1 + scale]`` about the crop centre; a shift uniform
+    in ``[-shift, shift] * S`` per axis; brightness, contrast and saturation factors uniform
+    in ``[1 - color_jitter, 1 + color_jitter]``. Pixels are resampled bilinearly (masks:
+    nearest), what falls outside the crop is zero; joints that leave the crop become
+    invisible.
+    """
+
+    def __init__(self, flip_p: float = 0.5, scale: float = 0.1, shift: float = 0.05,
+                 color_jitter: float = 0.2):
+        for name, v, hi in (("flip_p", flip_p, 1.0), ("scale", scale, 0.9),
+                            ("shift", shift, 0.5), ("color_jitter", color_jitter, 1.0)):
+            if not (isinstance(v, (int, float)) and 0 <= v <= hi):
+                raise ValueError(f"{name} must lie in [0, {hi}], got {v!r}")
+        self.flip_p, self.scale, self.shift = float(flip_p), float(scale), float(shift)
+        self.color_jitter = float(color_jitter)
+
+    def __repr__(self) -> str:
+        return (f"ImageAugment(flip_p={self.flip_p}, scale={self.scale}, shift={self.shift}, "
+                f"color_jitter={self.color_jitter})")
+
+    def __call__(self, rgb, joints, visible, mask=None, *, rng: np.random.Generator):
+        """``rgb`` (N, K, S, S, 3) uint8 (N clips of K frames), ``joints`` (N, K, J, 2),
+        ``visible`` (N, K, J), ``mask`` (N, K, S, S) or None. Returns ``(rgb, joints,
+        visible, mask)`` with ``rgb`` as float32 CHANNELS-FIRST (N, K, 3, S, S) on the 0-255
+        scale (round it for uint8)."""
+        N, K, S = rgb.shape[0], rgb.shape[1], rgb.shape[2]
+        flip = rng.random(N) < self.flip_p
+        zoom = 1 + rng.uniform(-self.scale, self.scale, N)
+        move = rng.uniform(-self.shift, self.shift, (N, 2)) * S
+        jitter = 1 + rng.uniform(-self.color_jitter, self.color_jitter, (N, 3))
+        # pixels: output p maps to input (p - c) / zoom + c - move, mirrored in u if flipped
+        theta = np.zeros((N, 2, 3), np.float32)
+        sign = np.where(flip, -1.0, 1.0)
+        theta[:, 0, 0] = sign / zoom
+        theta[:, 0, 2] = -sign * 2 * move[:, 0] / S
+        theta[:, 1, 1] = 1 / zoom
+        theta[:, 1, 2] = -2 * move[:, 1] / S
+        grid = F.affine_grid(torch.from_numpy(np.repeat(theta, K, 0)), (N * K, 3, S, S),
+                             align_corners=False)
+        x = torch.from_numpy(np.ascontiguousarray(rgb)).reshape(N * K, S, S, 3)
+        x = F.grid_sample(x.permute(0, 3, 1, 2).float(), grid, mode="bilinear",
+                          padding_mode="zeros", align_corners=False)
+        if self.color_jitter > 0:
+            x = _jitter(x, torch.from_numpy(np.repeat(jitter, K, 0).astype(np.float32)))
+        if mask is not None:
+            m = torch.from_numpy(np.ascontiguousarray(mask)).reshape(N * K, 1, S, S).float()
+            m = F.grid_sample(m, grid, mode="nearest", padding_mode="zeros", align_corners=False)
+            mask = m.reshape(N, K, S, S).round().to(torch.uint8).numpy()
+        j = np.array(joints, np.float32, copy=True)
+        v = np.array(visible, bool, copy=True)
+        j[flip], v[flip] = j[flip][..., _FLIP, :], v[flip][..., _FLIP]
+        j[flip, ..., 0] = S - j[flip, ..., 0]
+        c = S / 2
+        j = (j - c + move[:, None, None, :].astype(np.float32)) \
+            * zoom[:, None, None, None].astype(np.float32) + c
+        v &= np.all((j >= 0) & (j <= S), -1)
+        return x.reshape(N, K, 3, S, S).numpy(), j, v, mask
+
+
+def _jitter(x: torch.Tensor, f: torch.Tensor) -> torch.Tensor:
+    """Brightness, contrast, saturation factors ``f`` (M, 3) on (M, 3, S, S) 0-255 images."""
+    w = torch.tensor(_GREY).view(1, 3, 1, 1)
+    x = x * f[:, 0].view(-1, 1, 1, 1)
+    grey_mean = (x * w).sum(1, keepdim=True).mean((2, 3), keepdim=True)
+    x = (x - grey_mean) * f[:, 1].view(-1, 1, 1, 1) + grey_mean
+    grey = (x * w).sum(1, keepdim=True)
+    x = grey + (x - grey) * f[:, 2].view(-1, 1, 1, 1)
+    return x.clamp_(0, 255)
