@@ -5,10 +5,10 @@ Poses are real kinematics: the female reference skeleton with swinging arms and 
 forward kinematics through :mod:`bsp_fast.geometry`, a walker moving on a straight line and
 a CARLA camera projection, so 2D and 3D arrays of a clip agree. Clips are windows of
 per-recording frame sequences (stride = offset), so overlapping clips share frames exactly
-as converted data do. ``media=True`` adds the future per-split frame table (``frames/rgb``,
+as converted data do. ``media=True`` adds the per-split frame table (``frames/rgb``,
 ``frames/mask``, ``frames/crop_box``, ``frames/joint_visible``, ``frames/mask_bbox``,
-``frames/visible_pixels``, ``clip_frames``); the red channel of frame ``k`` holds
-``k % 256`` so readers can check they fetched the right frame.
+``frames/visible_pixels``, ``frames/frame_idx``, ``clip_frames``); the red channel of frame
+``k`` holds ``k % 256`` so readers can check they fetched the right frame.
 """
 from __future__ import annotations
 
@@ -157,6 +157,8 @@ def _write_media(g, recs, clips, L, S, rows):
     mb = np.tile(np.array([S / 3, S / 4, 2 * S / 3, 3 * S / 4], np.float32), (F, 1))
     g.create_dataset("frames/mask_bbox", data=mb)
     g.create_dataset("frames/visible_pixels", data=np.full(F, (S // 2) * (S // 3), np.int64))
+    g.create_dataset("frames/frame_idx",
+                     data=np.concatenate([np.arange(len(recs[r]["uv"])) for r in used]))
     g.create_dataset("clip_frames", data=(frames[:, None] + np.arange(L)).astype(np.int64),
                      chunks=rows((len(frames), L)))
 
