@@ -55,5 +55,16 @@ __all__ = [
     "rotation_matrix", "rotation_to_euler", "to_world", "transform_points", "skeleton",
     "diagnostics", "Error", "CsvParseError", "VideoDecodeError", "VideoEncodeError",
     "ApngError", "Hdf5Error", "MotionError", "set_num_threads", "num_threads", "convert",
-    "media", "synth", "VideoReader", "ApngReader",
+    "media", "synth", "VideoReader", "ApngReader", "train", "evaluate", "predict",
 ]
+
+_TRAINING = {"train": "train", "evaluate": "evaluate", "predict": "predict"}
+
+
+def __getattr__(name):
+    # bsp_fast.train/evaluate/predict import torch and Lightning (seconds): on first use only
+    if name in _TRAINING:
+        import importlib
+
+        return getattr(importlib.import_module(f".training.{_TRAINING[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -3,6 +3,9 @@
     python -m bsp_fast --version        package and linked library versions
     python -m bsp_fast convert ...      same as bsp-convert
     python -m bsp_fast synth ...        same as bsp-synth
+    python -m bsp_fast train ...        same as bsp-train
+    python -m bsp_fast eval ...         same as bsp-eval
+    python -m bsp_fast predict ...      same as bsp-predict
 """
 from __future__ import annotations
 
@@ -27,6 +30,12 @@ def main(argv=None) -> int:
         from bsp_fast.synth.cli import main as synth_main
 
         return synth_main(argv[1:])
+    training = {"train": "train", "eval": "evaluate", "predict": "predict"}
+    if argv and argv[0] in training:
+        import importlib
+
+        module = importlib.import_module(f"bsp_fast.training.{training[argv[0]]}")
+        return module.main(argv[1:])
     if not argv or argv[0] in ("--version", "-V", "version"):
         return _versions()
     print(__doc__.strip(), file=sys.stderr if argv[0] not in ("-h", "--help") else sys.stdout)

@@ -1,16 +1,16 @@
 """Training, evaluation and prediction of the report's baselines (``bsp-train``,
 ``bsp-eval``, ``bsp-predict``); see docs/training.md.
 
-``train``, ``evaluate`` and ``predict`` are imported on first access: they pull in torch
-and Lightning, which take seconds to import.
+The functions are ``bsp_fast.train``, ``bsp_fast.evaluate`` and ``bsp_fast.predict`` (the
+modules ``bsp_fast.training.train``, ``.evaluate``, ``.predict`` hold them and their
+command lines). Nothing here imports torch or Lightning until it is used.
 """
 from __future__ import annotations
 
-__all__ = ["train", "evaluate", "predict", "TrainResult", "EvalResult", "PredictResult",
-           "runs_table", "TASK_MODULES", "load_module"]
+__all__ = ["TrainResult", "EvalResult", "PredictResult", "runs_table", "TASK_MODULES",
+           "load_module"]
 
-_LAZY = {"train": "train", "TrainResult": "train", "evaluate": "evaluate",
-         "EvalResult": "evaluate", "predict": "predict", "PredictResult": "predict",
+_LAZY = {"TrainResult": "train", "EvalResult": "evaluate", "PredictResult": "predict",
          "runs_table": "tables", "TASK_MODULES": "tasks", "load_module": "tasks"}
 
 

@@ -227,9 +227,11 @@ def _convert(opt: Option, value):
             if isinstance(value, (dict, list, bool)):
                 raise ValueError
             value = str(value)
+    except ConfigError:
+        raise
     except (TypeError, ValueError):
-        raise ConfigError(f"{opt.name} expects {'an integer' if kind == 'int' else 'a number' if kind == 'float' else 'a string'}, "
-                          f"got {value!r}") from None
+        what = {"int": "an integer", "float": "a finite number"}.get(kind, "a string")
+        raise ConfigError(f"{opt.name} expects {what}, got {value!r}") from None
     if opt.choices and value not in opt.choices:
         raise ConfigError(f"{opt.name} must be one of {list(opt.choices)}, got {value!r}")
     if opt.minimum is not None and value < opt.minimum:

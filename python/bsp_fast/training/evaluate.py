@@ -6,7 +6,6 @@ Python: ``bsp_fast.evaluate("runs/lifting-martinez", split="test")`` -> :class:`
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,12 +84,10 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
     precision = resolve_precision(cfg["precision"], cfg["accelerator"])
     trainer = make_trainer(cfg, None, precision, fit=False)
     if split == "test":
-        out = trainer.test(module, datamodule=dm, verbose=False)
+        trainer.test(module, datamodule=dm, verbose=False)
     else:
-        out = trainer.validate(module, datamodule=dm, verbose=False)
-    prefix = f"{split}/"
-    metrics = {k[len(prefix):]: float(v) for k, v in (out[0] if out else {}).items()
-               if k.startswith(prefix)}
+        trainer.validate(module, datamodule=dm, verbose=False)
+    metrics = dict(module.results.get(split, {}))
     return EvalResult(task=module.task, model=module.hparams["model"], split=split,
                       metrics=metrics, checkpoint=Path(ckpt), config=cfg)
 

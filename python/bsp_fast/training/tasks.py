@@ -50,6 +50,7 @@ class TaskModule(pl.LightningModule):
         self.train_loss = MeanMetric()
         self.val_metrics = TaskMetrics(self.task)
         self.test_metrics = TaskMetrics(self.task)
+        self.results: dict = {}  # the last computed {"val": {...}, "test": {...}}
 
     def forward(self, batch: dict) -> torch.Tensor:
         return self.net.forward_batch(batch)
@@ -82,6 +83,7 @@ class TaskModule(pl.LightningModule):
     def _log_metrics(self, prefix: str, metrics: TaskMetrics) -> None:
         values = metrics.compute()  # already reduced over processes by torchmetrics
         metrics.reset()
+        self.results[prefix] = values  # float64 sums / counts, unrounded
         # identical on every process: sync_dist averages equal values (exact)
         self.log_dict({f"{prefix}/{k}": float(v) for k, v in values.items()},
                       sync_dist=True, prog_bar=False)

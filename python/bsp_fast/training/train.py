@@ -86,10 +86,12 @@ def make_datamodule(cfg: dict, h5=None):
     data = Path(h5 or cfg["data"])
     if not data.exists():
         raise RunError(f"{data}: no such dataset directory or HDF5 file")
+    # strings, not Paths: the data module's arguments are saved in checkpoints, which are
+    # read back with torch.load(weights_only=True)
     if data.is_dir() or data.name == "data.csv":
-        paths = dict(dataset_dir=data if data.is_dir() else data.parent)
+        paths = dict(dataset_dir=str(data if data.is_dir() else data.parent))
     else:
-        paths = dict(h5_path=data)
+        paths = dict(h5_path=str(data))
     convert = dict(label=cfg["label"], crop_size=cfg["crop_size"], seed=cfg["split_seed"])
     for key in ("fov", "eval_clip_offset"):
         if cfg[key] is not None:
@@ -166,8 +168,13 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
 
     from .checkpointing import RunCheckpoint
 
+    import logging
+
     warnings.filterwarnings("ignore", message=r".*does not have many workers.*")
     warnings.filterwarnings("ignore", message=r".*number of training batches.*")
+    warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\).*")
+    for name in ("lightning.pytorch", "lightning.fabric"):  # device banners and tips
+        logging.getLogger(name).setLevel(logging.WARNING)
     limit = cfg["limit_batches"] or None
     common = dict(accelerator=cfg["accelerator"], precision=precision,
                   enable_progress_bar=not cfg["quiet"], enable_model_summary=False,
@@ -233,6 +240,11 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
         if copy_from is not None:
             ckpt_path = tmp / "checkpoints" / "last.ckpt"
         trainer = make_trainer(cfg, tmp, precision)
+        if not cfg["quiet"]:
+            n = {s: len(d) for s, d in dm.datasets.items()}
+            print(f"bsp-train: {cfg['task']} / {cfg['model']}, {trainer.accelerator.__class__.__name__.replace('Accelerator', '').lower()} "
+                  f"x {trainer.world_size}, precision {precision}; {n.get('train')} train, "
+                  f"{n.get('val')} val, {n.get('test')} test clips of {dm.h5_path} -> {final}")
         seconds = {}
         t0 = time.perf_counter()
         previous = read_run(copy_from)["metrics"] if copy_from is not None else None
@@ -249,11 +261,11 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
             trainer.fit(module, datamodule=dm, ckpt_path=ckpt_path)
             seconds["fit"] = time.perf_counter() - t0
             t0 = time.perf_counter()
-            tested = trainer.test(module, datamodule=dm, ckpt_path="best", verbose=False)
+            trainer.test(module, datamodule=dm, ckpt_path="best", verbose=False)
             seconds["test"] = time.perf_counter() - t0
         finally:
             os.environ.pop(ENV_TMP, None)
-        result = _finish(cfg, tmp, final, trainer, tested, initial, precision, seconds)
+        result = _finish(cfg, tmp, final, trainer, initial, precision, seconds)
     return result
 
 
@@ -279,13 +291,12 @@ def _log_initial(trainer, initial: dict, quiet: bool) -> None:
             print(f"  {split}: {row}")
 
 
-def _finish(cfg, tmp: Path, final: Path, trainer, tested, initial, precision, seconds):
+def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds):
     from .. import __version__
     from .curves import plot_curves, read_logs
     from .scoring import UNITS
 
-    test = {k.split("/", 1)[1]: float(v) for k, v in (tested[0] if tested else {}).items()
-            if k.startswith("test/")}
+    test = dict(trainer.lightning_module.results.get("test", {}))
     logs = read_logs(tmp)
     val_loss = logs.get("val/loss", {})
     best_epoch = min(val_loss, key=val_loss.get) if val_loss else None
@@ -305,9 +316,10 @@ def _finish(cfg, tmp: Path, final: Path, trainer, tested, initial, precision, se
 
     extra = {"resolved": {"precision": precision, "h5": str(Path(trainer.datamodule.h5_path).absolute()),
                           "hparams": metrics["hparams"], "world_size": metrics["world_size"]},
-             "versions": {"bsp_fast": __version__, "torch": torch.__version__,
-                          "lightning": lightning.__version__}}
-    C.write_yaml(cfg, tmp / "config.yaml", extra)
+             "versions": {"bsp_fast": __version__, "torch": str(torch.__version__),
+                          "lightning": str(lightning.__version__)}}
+    # force/resume are actions of this command, not settings of the run
+    C.write_yaml(dict(cfg, force=False, resume=None), tmp / "config.yaml", extra)
     plot_curves(tmp, cfg["task"], initial=initial.get("val"),
                 title=f"{cfg['task']} / {cfg['model']}")
     return TrainResult(run_dir=final, metrics=test, val=val, initial=initial,
