@@ -6,8 +6,8 @@
 #include <cmath>
 #include <vector>
 
-#include "bsp/convert.hpp"
-#include "bsp/errors.hpp"
+#include "bsp/conversion/convert.hpp"
+#include "bsp/common/errors.hpp"
 
 using namespace bsp;
 

@@ -11,9 +11,9 @@
 #include <string>
 #include <vector>
 
-#include "../../cpp/src/csv_internal.hpp"  // white-box: the number fast path
-#include "bsp/csv.hpp"
-#include "bsp/errors.hpp"
+#include "csv/csv_internal.hpp"  // white-box: the number fast path
+#include "bsp/csv/csv.hpp"
+#include "bsp/common/errors.hpp"
 
 using namespace bsp;
 namespace fs = std::filesystem;

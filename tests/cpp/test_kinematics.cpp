@@ -9,10 +9,10 @@
 
 #include <Eigen/Dense>
 
-#include "bsp/camera.hpp"
-#include "bsp/kinematics.hpp"
-#include "bsp/parallel.hpp"
-#include "bsp/skeleton.hpp"
+#include "bsp/geometry/camera.hpp"
+#include "bsp/geometry/kinematics.hpp"
+#include "bsp/common/parallel.hpp"
+#include "bsp/geometry/skeleton.hpp"
 
 using namespace bsp;
 

@@ -8,10 +8,10 @@
 #include <string>
 #include <vector>
 
-#include "bsp/apng.hpp"
-#include "bsp/errors.hpp"
-#include "bsp/png_common.hpp"
-#include "bsp/video.hpp"
+#include "bsp/media/apng.hpp"
+#include "bsp/common/errors.hpp"
+#include "media/png.hpp"  // white-box: PNG filters and blending
+#include "bsp/media/video.hpp"
 
 using namespace bsp;
 namespace fs = std::filesystem;

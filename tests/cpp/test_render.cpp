@@ -4,7 +4,7 @@
 #include <limits>
 #include <vector>
 
-#include "bsp/render.hpp"
+#include "bsp/synth/render.hpp"
 
 using namespace bsp;
 using namespace bsp::render;

@@ -1,4 +1,4 @@
-// bsp-synth's animation import (bsp/motion.hpp): a tiny BVH written here, read via assimp.
+// bsp-synth's animation import (bsp/synth/motion.hpp): a tiny BVH written here, read via assimp.
 #include <doctest/doctest.h>
 
 #include <cmath>
@@ -7,8 +7,8 @@
 #include <fstream>
 #include <string>
 
-#include "bsp/errors.hpp"
-#include "bsp/motion.hpp"
+#include "bsp/common/errors.hpp"
+#include "bsp/synth/motion.hpp"
 
 namespace {
 std::string temp_path(const char* name) {

@@ -1,5 +1,5 @@
 // The clip planner on its own (SPEC section 4), for tests and in-memory re-splitting.
-#include "bsp/clips.hpp"
+#include "bsp/clips/clips.hpp"
 #include "common.hpp"
 #include "options.hpp"
 

@@ -1,5 +1,5 @@
 // bsp-convert binding: the whole conversion, GIL released, progress polled from Python.
-#include "bsp/convert.hpp"
+#include "bsp/conversion/convert.hpp"
 #include "common.hpp"
 #include "options.hpp"
 

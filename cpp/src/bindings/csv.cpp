@@ -1,8 +1,8 @@
 // data.csv reader/writer bindings. The reader's columns are handed to numpy without a copy
 // (each array owns its std::vector through a capsule); bsp_fast/csvio.py wraps the result.
-#include "../csv_internal.hpp"
-#include "bsp/csv.hpp"
-#include "bsp/errors.hpp"
+#include "../csv/csv_internal.hpp"
+#include "bsp/csv/csv.hpp"
+#include "bsp/common/errors.hpp"
 #include "common.hpp"
 
 namespace bsp::py_bind {

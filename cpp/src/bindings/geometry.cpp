@@ -1,8 +1,8 @@
 // Geometry kernels. Broadcasting and friendly shape errors live in bsp_fast/geometry.py;
 // these check sizes again so misuse of the private module cannot read out of bounds.
-#include "bsp/camera.hpp"
-#include "bsp/kinematics.hpp"
-#include "bsp/skeleton.hpp"
+#include "bsp/geometry/camera.hpp"
+#include "bsp/geometry/kinematics.hpp"
+#include "bsp/geometry/skeleton.hpp"
 #include "common.hpp"
 
 namespace bsp::py_bind {

@@ -1,7 +1,7 @@
 // Video and APNG readers/writers. Argument checks that need friendly wording live in
 // bsp_fast/media.py; sizes are checked again here so the private module cannot overrun.
-#include "bsp/apng.hpp"
-#include "bsp/video.hpp"
+#include "bsp/media/apng.hpp"
+#include "bsp/media/video.hpp"
 #include "common.hpp"
 
 #include <optional>

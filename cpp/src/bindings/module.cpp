@@ -1,9 +1,9 @@
 #include <algorithm>
 #include <map>
 
-#include "bsp/diagnostics.hpp"
-#include "bsp/errors.hpp"
-#include "bsp/parallel.hpp"
+#include "bsp/common/diagnostics.hpp"
+#include "bsp/common/errors.hpp"
+#include "bsp/common/parallel.hpp"
 #include "common.hpp"
 
 namespace bsp::py_bind {

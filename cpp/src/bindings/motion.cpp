@@ -1,7 +1,7 @@
 // Animation import for bsp-synth --motion (retargeting lives in bsp_fast/synth/motion.py).
 #include <cstring>
 
-#include "bsp/motion.hpp"
+#include "bsp/synth/motion.hpp"
 #include "common.hpp"
 
 namespace bsp::py_bind {

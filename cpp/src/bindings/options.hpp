@@ -1,6 +1,6 @@
 // Option parsing shared by the clips and convert bindings.
 #pragma once
-#include "bsp/clips.hpp"
+#include "bsp/clips/clips.hpp"
 #include "common.hpp"
 
 namespace bsp::py_bind {

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <string>
 
-#include "bsp/render.hpp"
+#include "bsp/synth/render.hpp"
 #include "common.hpp"
 
 namespace bsp::py_bind {

@@ -1,0 +1,117 @@
+// bsp-convert: data.csv -> train/val/test clips in one HDF5 file (SPEC sections 3 and 4).
+#pragma once
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "bsp/clips/clips.hpp"
+
+namespace bsp {
+
+// Media of every clip frame (on by default): pedestrian crops and masks in a per-split
+// frame table (docs/hdf5-schema.md, "Frame table").
+struct MediaOptions {
+  bool enabled = true;
+  int crop_size = 128;          // S: crops are S x S
+  bool skip_bad_media = false;  // leave out recordings whose media is missing or broken
+  // Measured in benchmarks/bench_convert_media.py (docs/hdf5-schema.md): masks shrink ~20x
+  // with deflate 1 and still read at ~30k frames/s; RGB crops only ~2.5x, and deflated
+  // RGB reads 15-30x slower, so it is opt-in (ConvertOptions::compress).
+  int rgb_level = 0;            // deflate level of frames/rgb (0 = none); chunks of 1 frame
+  int mask_level = 1;           // deflate level of frames/mask (0 = none)
+  int chunk_frames = 16;        // frames per chunk of frames/mask and uncompressed frames/rgb
+};
+
+struct ConvertOptions {
+  ClipOptions clips;
+  MediaOptions media;
+  double fov = 90.0;         // horizontal FOV of the camera (not stored in the CSV)
+  int threads = 0;           // 0 = all cores
+  bool verify = false;       // cross-check the pose columns and the projection
+  double verify_tol_mm = 1.0, verify_world_tol_mm = 20.0, verify_tol_px = 1.0;
+  bool compress = false;     // byte-shuffle + deflate for the large target arrays
+  int compression_level = 1;
+  int chunk_clips = 64;      // clips per HDF5 chunk
+  std::string source_path;   // stored as an attribute (the dataset directory)
+  std::map<std::string, std::string> extra_attrs;  // e.g. the Python-side settings JSON
+};
+
+// Polled by the Python side from another thread (no callbacks into Python).
+struct ConvertProgress {
+  // 0 read, 1 plan, 2 verify, 3 write clips, 4 done, 5 check media files, 6 media frames
+  // (done/total count rows in stage 0, media files in 5, frames in 6, clips otherwise).
+  std::atomic<int> stage{0};
+  std::atomic<std::uint64_t> done{0}, total{0};
+};
+
+struct VerifyRow {
+  std::string recording;  // video path without extension + "/<camera>_<pedestrian>"
+  double component_mm = 0, world_mm = 0, camera_px = 0;
+};
+
+struct BadMedia {
+  std::string path;    // the media file (dataset root + CSV path)
+  std::string reason;  // the reader's message
+};
+
+struct MediaReport {
+  std::array<std::size_t, 3> frames{};  // frame-table rows per split
+  double seconds = 0;                   // checking, decoding, cropping and writing
+  double check_seconds = 0;             // opening every file before decoding
+  std::vector<BadMedia> bad;            // left out with skip_bad_media
+  int passes = 0;  // times the file was written: > 1 when a file failed mid-decode (skipped)
+};
+
+struct ConvertReport {
+  std::size_t rows = 0, recordings = 0;
+  std::array<std::size_t, 3> clips{}, recordings_per_split{};
+  std::array<std::array<std::size_t, 2>, 3> class_counts{};
+  std::vector<std::pair<std::string, std::string>> skipped;  // recording, reason
+  std::size_t clips_rejected_out_of_image = 0, clips_dropped_by_balance = 0;
+  std::map<std::string, double> seconds;  // per stage
+  std::uint32_t source_crc32 = 0;
+  std::uint64_t source_bytes = 0;
+  std::vector<VerifyRow> verify;         // every recording, when verify is on
+  std::vector<std::string> verify_failed;  // recordings beyond tolerance
+  MediaReport media;
+};
+
+// Throws bsp::Error naming the CSV line/column and the path for an absolute media path, one
+// with a `..` component, an empty one, or one not found; reader errors (VideoDecodeError,
+// ApngError) name the file and frame. With media.skip_bad_media such recordings are left
+// out (re-planned without them) and listed in report.media.bad.
+ConvertReport convert_csv(const std::string& csv_path, const std::string& out_path,
+                          const ConvertOptions& opt, ConvertProgress* progress = nullptr);
+
+// ---- Pedestrian crops (SPEC section 1: tag 4 = Pedestrian) ----------------------------
+inline constexpr std::uint8_t kPedestrianTag = 4;
+inline constexpr int kVisibilityRadius = 2;  // px around round(u, v)
+inline constexpr double kCropScale = 1.2;    // side = 1.2 x the larger bbox side (20 % margin)
+inline constexpr int kCropMinSize = 32;      // px, before resizing
+
+struct FrameMedia {
+  std::array<std::int32_t, 4> mask_bbox{-1, -1, -1, -1};  // [u0, v0, u1, v1), -1 = no tag 4
+  std::int64_t visible_pixels = 0;                          // tag-4 pixels in the frame
+  std::array<std::uint8_t, 26> joint_visible{};
+  std::array<float, 4> crop_box{};  // [u0, v0, u1, v1], integer edges, square, may leave the image
+};
+
+// The pedestrian statistics of one segmentation frame (height x width tags) with its 26
+// projected joints `uv` (u, v pairs; non-finite joints are ignored). A joint is visible
+// when a tag-4 pixel lies within kVisibilityRadius of (floor(u + 0.5), floor(v + 0.5)).
+// The crop box is the square of side max(kCropMinSize, ceil(kCropScale * max(w, h)))
+// around the centre of (joint bbox U mask bbox), its corner at floor(centre - side/2 + 0.5).
+FrameMedia frame_media(const std::uint8_t* tags, int width, int height, const float* uv);
+
+// Cuts `box` (integer edges, as frame_media makes them) out of an image of which only the
+// region roi_x, roi_y, roi_width x roi_height is given (`roi`: rows of roi_width * channels
+// bytes), pads the rest with zeros and resizes it to size x size into `out`: INTER_AREA for
+// pictures, INTER_NEAREST for class tags (`nearest`).
+void crop_resize(const std::uint8_t* roi, int roi_x, int roi_y, int roi_width, int roi_height,
+                 int channels, const std::array<float, 4>& box, int size, bool nearest,
+                 std::uint8_t* out);
+
+}  // namespace bsp

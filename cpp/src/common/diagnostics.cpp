@@ -1,0 +1,46 @@
+#include "bsp/common/diagnostics.hpp"
+
+#include <Eigen/Core>
+#include <assimp/version.h>
+#include <hdf5.h>
+#include <libdeflate.h>
+#include <opencv2/core/version.hpp>
+#include <opencv2/core/utility.hpp>
+
+extern "C" {
+#include <libavcodec/avcodec.h>
+#include <libavformat/avformat.h>
+#include <libavutil/avutil.h>
+#include <libswscale/swscale.h>
+}
+
+namespace bsp {
+namespace {
+std::string av_ver(unsigned v) {
+  return std::to_string(v >> 16) + "." + std::to_string((v >> 8) & 0xff) + "." +
+         std::to_string(v & 0xff);
+}
+}  // namespace
+
+std::map<std::string, std::string> library_versions() {
+  std::map<std::string, std::string> v;
+  v["bsp_core"] = BSP_VERSION;
+  v["ffmpeg"] = av_version_info();
+  v["libavcodec"] = av_ver(avcodec_version());
+  v["libavformat"] = av_ver(avformat_version());
+  v["libavutil"] = av_ver(avutil_version());
+  v["libswscale"] = av_ver(swscale_version());
+  v["opencv"] = cv::getVersionString();
+  unsigned maj = 0, min = 0, rel = 0;
+  H5get_libversion(&maj, &min, &rel);
+  v["hdf5"] = std::to_string(maj) + "." + std::to_string(min) + "." + std::to_string(rel);
+  v["eigen"] = std::to_string(EIGEN_WORLD_VERSION) + "." + std::to_string(EIGEN_MAJOR_VERSION) +
+               "." + std::to_string(EIGEN_MINOR_VERSION);
+  v["assimp"] = std::to_string(aiGetVersionMajor()) + "." + std::to_string(aiGetVersionMinor()) +
+                "." + std::to_string(aiGetVersionPatch());
+  v["libdeflate"] = LIBDEFLATE_VERSION_STRING;
+  v["compiler"] = __VERSION__;
+  return v;
+}
+
+}  // namespace bsp

@@ -1,0 +1,345 @@
+#include "bsp/conversion/convert.hpp"
+
+#include <fcntl.h>
+#include <libdeflate.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <set>
+#include <stdexcept>
+#include <tuple>
+
+#include "bsp/geometry/camera.hpp"
+#include "convert_internal.hpp"
+#include "bsp/geometry/skeleton.hpp"
+
+namespace bsp {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// CRC-32 of the whole file through mmap (libdeflate's CRC runs at several GB/s). Pages are
+// dropped from the mapping every 16 MB so a multi-GB data.csv does not count against the
+// process's resident memory.
+std::uint32_t file_crc32(const std::string& path, std::uint64_t& bytes) {
+  const int fd = ::open(path.c_str(), O_RDONLY);
+  if (fd < 0) throw Error("cannot open " + path + ": " + std::strerror(errno));
+  struct stat st {};
+  ::fstat(fd, &st);
+  bytes = static_cast<std::uint64_t>(st.st_size);
+  std::uint32_t crc = 0;
+  if (bytes) {
+    void* p = ::mmap(nullptr, bytes, PROT_READ, MAP_PRIVATE, fd, 0);
+    if (p == MAP_FAILED) {
+      ::close(fd);
+      throw Error("cannot mmap " + path + ": " + std::strerror(errno));
+    }
+    ::madvise(p, bytes, MADV_SEQUENTIAL);
+    constexpr std::uint64_t kStep = std::uint64_t{16} << 20;  // a multiple of the page size
+    auto* base = static_cast<unsigned char*>(p);
+    for (std::uint64_t at = 0; at < bytes; at += kStep) {
+      const std::uint64_t n = std::min(kStep, bytes - at);
+      crc = libdeflate_crc32(crc, base + at, n);
+      ::madvise(base + at, n, MADV_DONTNEED);
+    }
+    ::munmap(p, bytes);
+  }
+  ::close(fd);
+  return crc;
+}
+
+std::vector<std::string> needed_columns(bool media) {
+  std::vector<std::string> c = {
+      "id", "world.map", "camera.idx", "camera.transform", "camera.width", "camera.height",
+      "pedestrian.idx", "pedestrian.model", "pedestrian.age", "pedestrian.gender", "frame.idx",
+      "camera.recording", "frame.pedestrian.transform", "frame.pedestrian.velocity",
+      "frame.pedestrian.pose.world", "frame.pedestrian.pose.component",
+      "frame.pedestrian.pose.relative", "frame.pedestrian.is_crossing",
+      "frame.pedestrian.pose.camera"};
+  if (media) c.push_back("camera.semantic_segmentation");
+  return c;
+}
+
+using RecordingKey = std::tuple<std::int32_t, std::int64_t, std::int64_t>;
+
+RowKeys keys_of(const PoseTable& t) {
+  RowKeys k;
+  k.rows = t.rows;
+  k.id_code = t.id.codes.data();
+  k.camera_idx = t.camera_idx.data();
+  k.pedestrian_idx = t.pedestrian_idx.data();
+  k.frame_idx = t.frame_idx.data();
+  k.is_crossing = t.is_crossing.data();
+  k.pose_camera = t.pose_camera.data();
+  k.width = t.camera_width.data();
+  k.height = t.camera_height.data();
+  return k;
+}
+
+std::string label_rule(const ClipOptions& c) {
+  if (c.benchmark) return "video";
+  if (c.label_fraction > 0) return "any:" + std::to_string(c.label_fraction);
+  return "last";
+}
+
+std::string deflate_name(int level) {
+  return level > 0 ? "shuffle+deflate:" + std::to_string(level) : std::string("none");
+}
+
+void media_attrs(const h5::Group& g, const MediaOptions& m) {
+  g.attr("media", std::int64_t{m.enabled});
+  if (!m.enabled) return;
+  g.attr("crop_size", std::int64_t{m.crop_size});
+  g.attr("crop_scale", kCropScale);
+  g.attr("crop_min_size", std::int64_t{kCropMinSize});
+  g.attr("visibility_radius", std::int64_t{kVisibilityRadius});
+  g.attr("pedestrian_tag", std::int64_t{kPedestrianTag});
+  g.attr("media_compression", "frames/rgb " + deflate_name(m.rgb_level) + ", frames/mask " +
+                                  deflate_name(m.mask_level));
+  g.attr("skip_bad_media", std::int64_t{m.skip_bad_media});
+}
+
+void root_attrs(const h5::Group& g, const ConvertOptions& o, const ConvertReport& r) {
+  const ClipOptions& c = o.clips;
+  const int L = c.length, stride = c.stride ? c.stride : L;
+  g.attr("schema_version", std::int64_t{1});
+  g.attr("created_by", std::string("bsp_fast ") + BSP_VERSION);
+  g.attr("clip_length", std::int64_t{L});
+  g.attr("clip_stride", std::int64_t{stride});
+  g.attr("eval_clip_stride", std::int64_t{c.eval_stride ? c.eval_stride : stride});
+  g.attr("min_video_length", std::int64_t{c.min_video_length ? c.min_video_length : L});
+  g.attr("label_rule", label_rule(c));
+  g.attr("benchmark", std::int64_t{c.benchmark});
+  g.attr("val_frac", c.val_frac);
+  g.attr("test_frac", c.test_frac);
+  g.attr("seed", static_cast<std::int64_t>(c.seed));
+  g.attr("balance", std::int64_t{c.balance});
+  g.attr("fov", o.fov);
+  g.attr("compression", o.compress ? "shuffle+deflate:" + std::to_string(o.compression_level) : std::string("none"));
+  g.attr("class_labels", std::vector<std::string>{"not-crossing", "crossing"});
+  g.attr("joint_names", std::vector<std::string>(skeleton::kNames.begin(), skeleton::kNames.end()));
+  g.attr("parents", std::vector<std::int64_t>(skeleton::kParents.begin(), skeleton::kParents.end()));
+  g.attr("rotation_convention",
+         std::string("CARLA/Unreal: R = Rz(yaw) Ry(-pitch) Rx(-roll), left-handed, Z up, "
+                     "row-major 3x3 acting on column vectors"));
+  g.attr("source_path", o.source_path);
+  g.attr("source_crc32", static_cast<std::int64_t>(r.source_crc32));
+  g.attr("source_bytes", static_cast<std::int64_t>(r.source_bytes));
+  media_attrs(g, o.media);
+  if (o.media.enabled)
+    g.attr("media_recordings_left_out", static_cast<std::int64_t>(r.media.bad.size()));
+  for (const auto& [k, v] : o.extra_attrs) g.attr(k, v);
+  for (int s = 0; s < 3; ++s) {
+    g.attr(std::string("class_counts_") + kSplitNames[s],
+           std::vector<std::int64_t>{static_cast<std::int64_t>(r.class_counts[s][0]),
+                                     static_cast<std::int64_t>(r.class_counts[s][1])});
+  }
+}
+
+void fill_report(ConvertReport& r, const PoseTable& t, const Plan& plan) {
+  r.rows = t.rows;
+  r.recordings = plan.recordings.size();
+  for (int s = 0; s < 3; ++s) {
+    r.clips[s] = plan.splits[s].size();
+    r.recordings_per_split[s] = plan.split_recordings[s].size();
+    for (const Clip& c : plan.splits[s]) ++r.class_counts[s][c.label ? 1 : 0];
+  }
+  for (const auto& sk : plan.skipped) {
+    const Recording& rec = plan.recordings[sk.recording];
+    const std::size_t r0 = rec.rows.front();
+    r.skipped.emplace_back(t.recording.values[static_cast<std::size_t>(t.recording.codes[r0])] +
+                               " (" + std::to_string(rec.camera_idx) + "_" +
+                               std::to_string(rec.pedestrian_idx) + ")",
+                           sk.reason);
+  }
+  r.clips_rejected_out_of_image = plan.clips_rejected_out_of_image;
+  r.clips_dropped_by_balance = plan.clips_dropped_by_balance;
+}
+
+// plan_clips over the rows of every recording not in `excluded`, with Recording::rows
+// mapped back to rows of `t` (media left out with skip_bad_media: as if never recorded).
+Plan plan_excluding(const PoseTable& t, const ClipOptions& o, const std::set<RecordingKey>& excluded) {
+  if (excluded.empty()) return plan_clips(keys_of(t), o);
+  std::vector<std::size_t> keep;
+  for (std::size_t r = 0; r < t.rows; ++r)
+    if (!excluded.count({t.id.codes[r], t.camera_idx[r], t.pedestrian_idx[r]})) keep.push_back(r);
+  std::vector<std::int32_t> id;
+  std::vector<std::int64_t> cam, ped, frame, width, height;
+  std::vector<std::uint8_t> crossing;
+  std::vector<float> uv;
+  for (std::size_t r : keep) {
+    id.push_back(t.id.codes[r]), cam.push_back(t.camera_idx[r]), ped.push_back(t.pedestrian_idx[r]);
+    frame.push_back(t.frame_idx[r]), crossing.push_back(t.is_crossing[r]);
+    width.push_back(t.camera_width[r]), height.push_back(t.camera_height[r]);
+    uv.insert(uv.end(), &t.pose_camera[r * 52], &t.pose_camera[r * 52] + 52);
+  }
+  RowKeys k;
+  k.rows = keep.size();
+  k.id_code = id.data(), k.camera_idx = cam.data(), k.pedestrian_idx = ped.data();
+  k.frame_idx = frame.data(), k.is_crossing = crossing.data(), k.pose_camera = uv.data();
+  k.width = width.data(), k.height = height.data();
+  Plan plan = plan_clips(k, o);
+  for (Recording& rec : plan.recordings)
+    for (std::size_t& r : rec.rows) r = keep[r];
+  return plan;
+}
+
+std::string media_root(const std::string& csv_path) {
+  const std::string dir = std::filesystem::path(csv_path).parent_path().string();
+  return dir.empty() ? std::string(".") : dir;
+}
+
+void check_media_options(const MediaOptions& m) {
+  if (!m.enabled) return;
+  if (m.crop_size < 8 || m.crop_size > 1024)
+    throw std::invalid_argument("crop size must lie in [8, 1024], got " + std::to_string(m.crop_size));
+  if (m.rgb_level < 0 || m.rgb_level > 9 || m.mask_level < 0 || m.mask_level > 9)
+    throw std::invalid_argument("deflate levels of the frame table must lie in [0, 9] (0 = none)");
+  if (m.chunk_frames < 1) throw std::invalid_argument("chunk_frames must be positive");
+}
+
+// What the media stage of one pass works on.
+struct MediaPlan {
+  std::vector<detail::MediaFiles> files;
+  std::array<detail::FrameTable, 3> tables;
+};
+
+// Adds the recordings of `failures` to `excluded` and their files to the report's list.
+void exclude(const Plan& plan, const std::vector<detail::MediaFailure>& failures,
+             std::set<RecordingKey>& excluded, std::vector<BadMedia>& bad) {
+  for (const auto& f : failures) {
+    const Recording& rec = plan.recordings[f.recording];
+    excluded.insert({rec.id_code, rec.camera_idx, rec.pedestrian_idx});
+    bad.push_back({f.path, f.reason});
+  }
+}
+
+// Writes the whole file. Returns the recordings whose media failed while decoding (only
+// with skip_bad_media); the file is then incomplete and the caller converts again.
+std::vector<detail::MediaFailure> write_output(const std::string& out_path, const PoseTable& table,
+                                               const Plan& plan, const MediaPlan* media,
+                                               const ConvertOptions& opt, ConvertReport& report,
+                                               ConvertProgress* progress) {
+  auto t0 = Clock::now();
+  if (progress) {
+    progress->done = 0;
+    progress->total = report.clips[0] + report.clips[1] + report.clips[2];
+    progress->stage = 3;
+  }
+  h5::File file = h5::File::create(out_path);
+  const h5::Group root = file.root();
+  root_attrs(root, opt, report);
+  std::vector<h5::Group> groups;
+  for (int s = 0; s < 3; ++s) {
+    groups.push_back(root.create_group(kSplitNames[s]));
+    const h5::Group& g = groups.back();
+    g.attr("class_counts", std::vector<std::int64_t>{static_cast<std::int64_t>(report.class_counts[s][0]),
+                                                     static_cast<std::int64_t>(report.class_counts[s][1])});
+    g.attr("recordings", static_cast<std::int64_t>(report.recordings_per_split[s]));
+    detail::write_split(g, table, plan, plan.splits[s], opt.clips.length, opt, progress);
+  }
+  report.seconds["write"] = since(t0);
+  std::vector<detail::MediaFailure> failed;
+  if (media) {
+    t0 = Clock::now();
+    if (progress) {
+      progress->done = 0;
+      progress->total = media->tables[0].frames() + media->tables[1].frames() + media->tables[2].frames();
+      progress->stage = 6;
+    }
+    failed = detail::write_media(std::array<const h5::Group*, 3>{&groups[0], &groups[1], &groups[2]},
+                                 table, media->tables, media->files, opt, progress);
+    report.seconds["media"] = since(t0);
+  }
+  file.close();
+  return failed;
+}
+
+// Plans the media of a pass and opens every file. Returns the failures (thrown without
+// skip_bad_media) and fills `media` when there are none.
+std::vector<detail::MediaFailure> plan_media(const PoseTable& table, const Plan& plan,
+                                             const std::string& root, const ConvertOptions& opt,
+                                             MediaPlan& media, ConvertProgress* progress) {
+  media.files = detail::media_files(table, plan, root);  // refuses unsafe paths first
+  for (int s = 0; s < 3; ++s)
+    media.tables[s] = detail::plan_frame_table(plan, plan.splits[s], opt.clips.length);
+  auto failed = detail::check_media(table, media.tables, media.files, opt.threads, progress);
+  if (!failed.empty() && !opt.media.skip_bad_media) std::rethrow_exception(failed.front().error);
+  return failed;
+}
+
+void verify(const PoseTable& table, const Plan& plan, const ConvertOptions& opt,
+            ConvertReport& report, ConvertProgress* progress) {
+  if (progress) progress->stage = 2;
+  const auto t0 = Clock::now();
+  report.verify = detail::verify_recordings(table, plan, opt.fov, opt.threads);
+  for (const VerifyRow& v : report.verify)
+    if (!(v.component_mm <= opt.verify_tol_mm && v.world_mm <= opt.verify_world_tol_mm &&
+          v.camera_px <= opt.verify_tol_px))
+      report.verify_failed.push_back(v.recording);
+  report.seconds["verify"] = since(t0);
+}
+
+}  // namespace
+
+ConvertReport convert_csv(const std::string& csv_path, const std::string& out_path,
+                          const ConvertOptions& opt, ConvertProgress* progress) {
+  check_media_options(opt.media);
+  ConvertReport base;
+  auto t0 = Clock::now();
+  base.source_crc32 = file_crc32(csv_path, base.source_bytes);
+  CsvReadOptions ro;
+  ro.columns = needed_columns(opt.media.enabled);
+  ro.threads = opt.threads;
+  if (progress) ro.rows_total = &progress->total, ro.rows_done = &progress->done;  // stage 0: rows
+  const PoseTable table = read_pose_csv(csv_path, ro);
+  base.seconds["read"] = since(t0);
+  if (progress) progress->done = table.rows, progress->stage = 1;
+
+  std::set<RecordingKey> excluded;
+  std::vector<BadMedia> bad;
+  double check_seconds = 0;
+  for (int writes = 1;;) {
+    ConvertReport report = base;
+    t0 = Clock::now();
+    const Plan plan = plan_excluding(table, opt.clips, excluded);
+    fill_report(report, table, plan);
+    report.seconds["plan"] = since(t0);
+    MediaPlan media;
+    if (opt.media.enabled) {
+      t0 = Clock::now();
+      auto failed = plan_media(table, plan, media_root(csv_path), opt, media, progress);
+      check_seconds += since(t0);
+      if (!failed.empty()) {
+        exclude(plan, failed, excluded, bad);
+        continue;
+      }
+    }
+    if (opt.verify) verify(table, plan, opt, report, progress);
+    report.media.bad = bad;
+    auto failed = write_output(out_path, table, plan, opt.media.enabled ? &media : nullptr, opt,
+                               report, progress);
+    if (!failed.empty()) {
+      exclude(plan, failed, excluded, bad);
+      ++writes;
+      continue;
+    }
+    for (int s = 0; s < 3; ++s) report.media.frames[s] = media.tables[s].frames();
+    report.media.check_seconds = check_seconds;
+    report.media.seconds = check_seconds + (opt.media.enabled ? report.seconds["media"] : 0.0);
+    report.media.passes = writes;
+    if (progress) progress->stage = 4;
+    return report;
+  }
+}
+
+}  // namespace bsp

@@ -1,0 +1,177 @@
+// Writing one split of clips: per-clip arrays are filled in parallel into a batch buffer,
+// then written by the one thread that owns the HDF5 file (libhdf5 is not thread-safe).
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "convert_internal.hpp"
+#include "bsp/geometry/kinematics.hpp"
+#include "bsp/common/parallel.hpp"
+
+namespace bsp::detail {
+namespace {
+
+constexpr int J = 26;
+
+struct Field {
+  std::string name;
+  h5::Type type;
+  std::vector<hsize_t> tail;  // shape after (N, L) for per-frame fields
+  bool big;                   // eligible for compression
+  std::size_t per_frame() const {
+    std::size_t n = 1;
+    for (auto d : tail) n *= d;
+    return n;
+  }
+  std::size_t elem() const { return type == h5::Type::I64 ? 8 : type == h5::Type::U8 ? 1 : 4; }
+};
+
+const std::vector<Field>& frame_fields() {
+  static const std::vector<Field> f = {
+      {"projection_2d", h5::Type::F32, {J, 2}, false},
+      {"targets/relative_pose_loc", h5::Type::F32, {J, 3}, true},
+      {"targets/relative_pose_rot", h5::Type::F32, {J, 3, 3}, true},
+      {"targets/absolute_pose_loc", h5::Type::F32, {J, 3}, true},
+      {"targets/absolute_pose_rot", h5::Type::F32, {J, 3, 3}, true},
+      {"targets/world_pose_loc", h5::Type::F32, {J, 3}, true},
+      {"targets/world_pose_rot", h5::Type::F32, {J, 3, 3}, true},
+      {"targets/world_loc", h5::Type::F32, {3}, false},
+      {"targets/world_rot", h5::Type::F32, {3, 3}, false},
+      {"targets/velocity", h5::Type::F32, {3}, false},
+      {"targets/bboxes", h5::Type::F32, {2, 2}, false},
+      {"targets/is_crossing", h5::Type::U8, {}, false},
+      {"targets/frame_idx", h5::Type::I64, {}, false},
+  };
+  return f;
+}
+
+// Six-number transforms -> location (3) and CARLA rotation matrix (9), float32.
+void split_transform(const float* t6, float* loc, float* rot) {
+  loc[0] = t6[0], loc[1] = t6[1], loc[2] = t6[2];
+  const Mat3 R = rotation_from_pyr(t6[3], t6[4], t6[5]);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) rot[3 * r + c] = static_cast<float>(R(r, c));
+}
+
+void split_pose(const float* pose, float* loc, float* rot) {
+  for (int j = 0; j < J; ++j) split_transform(pose + 6 * j, loc + 3 * j, rot + 9 * j);
+}
+
+// Fills frame f of one clip into the per-field buffers at frame slot `s`.
+void fill_frame(const PoseTable& t, std::size_t row, std::vector<std::vector<std::uint8_t>>& buf,
+                std::size_t s) {
+  auto F = [&](int i) { return reinterpret_cast<float*>(buf[i].data()) + s * frame_fields()[i].per_frame(); };
+  std::memcpy(F(0), &t.pose_camera[row * J * 2], sizeof(float) * J * 2);
+  split_pose(&t.pose_relative[row * J * 6], F(1), F(2));
+  split_pose(&t.pose_component[row * J * 6], F(3), F(4));
+  split_pose(&t.pose_world[row * J * 6], F(5), F(6));
+  split_transform(&t.walker_transform[row * 6], F(7), F(8));
+  std::memcpy(F(9), &t.velocity[row * 3], sizeof(float) * 3);
+  float* bb = F(10);
+  const float* uv = &t.pose_camera[row * J * 2];
+  float lo_u = INFINITY, lo_v = INFINITY, hi_u = -INFINITY, hi_v = -INFINITY;
+  for (int j = 0; j < J; ++j) {
+    if (!std::isfinite(uv[2 * j]) || !std::isfinite(uv[2 * j + 1])) continue;
+    lo_u = std::min(lo_u, uv[2 * j]), hi_u = std::max(hi_u, uv[2 * j]);
+    lo_v = std::min(lo_v, uv[2 * j + 1]), hi_v = std::max(hi_v, uv[2 * j + 1]);
+  }
+  bb[0] = lo_u, bb[1] = lo_v, bb[2] = hi_u, bb[3] = hi_v;
+  buf[11][s] = t.is_crossing[row];
+  reinterpret_cast<std::int64_t*>(buf[12].data())[s] = t.frame_idx[row];
+}
+
+std::string str_at(const StringColumn& c, std::size_t row) {
+  return c.values[static_cast<std::size_t>(c.codes[row])];
+}
+
+std::string strip_ext(const std::string& p) {
+  const auto dot = p.rfind('.'), slash = p.rfind('/');
+  return dot == std::string::npos || (slash != std::string::npos && dot < slash) ? p : p.substr(0, dot);
+}
+
+}  // namespace
+
+void write_split(const h5::Group& g, const PoseTable& t, const Plan& plan,
+                 const std::vector<Clip>& clips, int L, const ConvertOptions& opt,
+                 ConvertProgress* progress) {
+  const hsize_t N = clips.size();
+  const h5::Compression none{}, packed{true, opt.compression_level};
+  g.create_group("targets");
+  const auto& fields = frame_fields();
+  std::vector<h5::Handle> ds;
+  std::vector<std::vector<hsize_t>> shapes;
+  for (const Field& f : fields) {
+    std::vector<hsize_t> shape = {N, static_cast<hsize_t>(L)};
+    shape.insert(shape.end(), f.tail.begin(), f.tail.end());
+    ds.push_back(g.create_dataset(f.name, f.type, shape, static_cast<hsize_t>(opt.chunk_clips),
+                                  f.big && opt.compress ? packed : none));
+    shapes.push_back(shape);
+  }
+  const std::size_t batch = static_cast<std::size_t>(std::max(opt.chunk_clips, 1)) * 4;
+  std::vector<std::vector<std::uint8_t>> buf(fields.size());
+  for (std::size_t i = 0; i < fields.size(); ++i)
+    buf[i].resize(batch * static_cast<std::size_t>(L) * fields[i].per_frame() * fields[i].elem());
+  for (std::size_t c0 = 0; c0 < N; c0 += batch) {
+    const std::size_t nb = std::min<std::size_t>(batch, N - c0);
+    parallel_for(nb * static_cast<std::size_t>(L), 256, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t s = lo; s < hi; ++s) {
+        const Clip& c = clips[c0 + s / static_cast<std::size_t>(L)];
+        const std::size_t row = plan.recordings[c.recording].rows[c.first + s % static_cast<std::size_t>(L)];
+        fill_frame(t, row, buf, s);
+      }
+    }, opt.threads);
+    for (std::size_t i = 0; i < fields.size(); ++i)
+      g.write_rows(ds[i], fields[i].name, fields[i].type, shapes[i], c0, nb, buf[i].data());
+    if (progress) progress->done += nb;
+  }
+  write_clip_meta(g, t, plan, clips, L);
+}
+
+void write_clip_meta(const h5::Group& g, const PoseTable& t, const Plan& plan,
+                     const std::vector<Clip>& clips, int L) {
+  const std::size_t N = clips.size();
+  std::vector<std::string> video(N), ped(N), age(N), gender(N), model(N), map(N);
+  std::vector<std::int32_t> clip_id(N), segment(N);
+  std::vector<std::int64_t> start(N), end(N), width(N), height(N);
+  std::vector<std::uint8_t> label(N);
+  std::vector<float> cam(N * 6);
+  for (std::size_t i = 0; i < N; ++i) {
+    const Clip& c = clips[i];
+    const Recording& rec = plan.recordings[c.recording];
+    const std::size_t first = rec.rows[c.first], last = rec.rows[c.first + static_cast<std::size_t>(L) - 1];
+    video[i] = strip_ext(str_at(t.recording, first));
+    ped[i] = std::to_string(rec.camera_idx) + "_" + std::to_string(rec.pedestrian_idx);
+    age[i] = str_at(t.age, first), gender[i] = str_at(t.gender, first);
+    model[i] = str_at(t.model, first), map[i] = str_at(t.map, first);
+    clip_id[i] = c.index, segment[i] = c.segment, label[i] = c.label;
+    start[i] = t.frame_idx[first], end[i] = t.frame_idx[last] + 1;
+    width[i] = t.camera_width[first], height[i] = t.camera_height[first];
+    std::copy_n(&t.camera_transform[first * 6], 6, &cam[i * 6]);
+  }
+  const h5::Compression none{};
+  auto put = [&](const std::string& name, h5::Type type, std::vector<hsize_t> shape, const void* d) {
+    auto h = g.create_dataset(name, type, shape, 4096, none);
+    g.write_rows(h, name, type, shape, 0, shape[0], d);
+  };
+  put("labels", h5::Type::U8, {N}, label.data());
+  const h5::Group m = g.create_group("meta");
+  m.write_strings("video_id", video);
+  m.write_strings("pedestrian_id", ped);
+  m.write_strings("age", age);
+  m.write_strings("gender", gender);
+  m.write_strings("model", model);
+  m.write_strings("map", map);
+  auto put_m = [&](const std::string& name, h5::Type type, std::vector<hsize_t> shape, const void* d) {
+    auto h = m.create_dataset(name, type, shape, 4096, none);
+    m.write_rows(h, name, type, shape, 0, shape[0], d);
+  };
+  put_m("clip_id", h5::Type::I32, {N}, clip_id.data());
+  put_m("segment", h5::Type::I32, {N}, segment.data());
+  put_m("start_frame", h5::Type::I64, {N}, start.data());
+  put_m("end_frame", h5::Type::I64, {N}, end.data());
+  put_m("clip_width", h5::Type::I64, {N}, width.data());
+  put_m("clip_height", h5::Type::I64, {N}, height.data());
+  put_m("camera_transform", h5::Type::F32, {N, 6}, cam.data());
+}
+
+}  // namespace bsp::detail

@@ -1,0 +1,290 @@
+// Internals shared by the csv_*.cpp files: the column schema and the hot-loop scanners.
+// The scanners follow fast_float's discipline: they never throw or allocate, and return
+// where they stopped plus whether the cell was well-formed. Explaining a failure (what was
+// expected, what was found) is the cold path's job (explain.cpp), which re-reads the
+// offending cell slowly.
+#pragma once
+#include <fast_float/fast_float.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "bsp/csv/csv.hpp"
+
+namespace bsp::csv_detail {
+
+enum class Kind : std::uint8_t { string, integer, floats, boolean };
+
+struct ColumnSpec {
+  const char* name;
+  Kind kind;
+  std::uint16_t outer;  // lists per cell for nested cells, 0 for a flat list
+  std::uint16_t inner;  // numbers per (inner) list
+  std::size_t numbers() const { return outer ? std::size_t{outer} * inner : inner; }
+};
+
+extern const ColumnSpec kSpecs[kPoseCsvColumnCount];
+inline constexpr int kCrossingColumn = 20;
+inline constexpr int kKeyColumns[4] = {0, 2, 6, 11};  // id, camera.idx, pedestrian.idx, frame.idx
+
+// Index of a CSV column name in kPoseCsvColumns (the crossing alias maps to 20), or -1.
+int column_index(std::string_view name);
+
+// Where a column lives in a PoseTable; only the members of its kind are set.
+struct ColumnRef {
+  StringColumn* str = nullptr;
+  std::vector<std::int64_t>* ints = nullptr;
+  std::vector<float>* floats = nullptr;
+  std::vector<std::uint8_t>* bools = nullptr;
+  std::vector<std::uint8_t>* valid = nullptr;
+};
+ColumnRef column_ref(PoseTable& t, int col);
+
+// "text" shortened and escaped for an error message.
+std::string snippet(std::string_view text, std::size_t max_chars = 40);
+
+// Explains why a row failed. `failed_cell` is the header cell where the hot loop stopped;
+// `header_cols` maps each header cell to a column index or -1. Returns "column 'x': ...".
+std::string explain_row(std::string_view row, std::size_t failed_cell,
+                        const std::vector<std::string>& header,
+                        const std::vector<int>& header_cols);
+
+// The file's lines: the header and the non-blank data lines (offsets exclude "\r\n").
+struct Lines {
+  std::string_view header;
+  std::vector<std::size_t> begin, end;
+  std::vector<std::int64_t> number;  // 1-based line numbers
+  bool last_unterminated = false;    // the file does not end with a line end
+};
+
+// Drops the mapped pages wholly inside [from, to) of the file mapping at `base` from this
+// process (MADV_DONTNEED). The file is read-only and mapped privately, so a later access
+// simply faults the page back in from the page cache: this only keeps the resident set of
+// a multi-GB data.csv from growing to the file's size. Called every kReleaseBytes behind
+// the scans.
+void release_pages(const char* base, std::size_t from, std::size_t to);
+inline constexpr std::size_t kReleaseBytes = std::size_t{16} << 20;
+
+// Parses every data line into the columns selected by `cols` (header cell -> column index
+// or -1 to skip), in parallel; throws CsvParseError naming the first bad row.
+void parse_rows(const char* data, const Lines& lines, const std::vector<std::string>& header,
+                const std::vector<int>& cols, PoseTable& t, int threads,
+                std::atomic<std::uint64_t>* rows_done = nullptr);
+
+// ------------------------------------------------------------------------ scanners
+inline const char* skip_spaces(const char* p, const char* end) {
+  while (p < end && *p == ' ') ++p;
+  return p;
+}
+
+// ------------------------------------------------------------------------ numbers
+// Python's repr of a float is almost always "-?d+.d+" with at most 17 significant digits.
+// That shape is scanned 8 bytes at a time (branches depend on digit counts, not on every
+// digit), then fast_float's own Eisel-Lemire step (compute_float, to_float) rounds the
+// decimal to float32, so the result is bit-identical to fast_float::from_chars, which
+// handles everything else: exponents, nan/inf, >19 digits, the last bytes of a line.
+[[gnu::noinline, gnu::cold]] inline bool parse_float_generic(const char*& p, const char* end,
+                                                            float& out) {
+  const auto r = fast_float::from_chars(p, end, out);
+  if (r.ec != std::errc()) return false;
+  p = r.ptr;
+  return true;
+}
+
+inline std::uint64_t load8(const char* p) {
+  std::uint64_t v;
+  std::memcpy(&v, p, 8);
+  return v;
+}
+
+// Index of the first non-digit byte of 8 little-endian chars (8 if all are digits).
+inline unsigned digit_run(std::uint64_t v) {
+  const std::uint64_t hi = 0xF0F0F0F0F0F0F0F0ull, zeros = 0x3030303030303030ull;
+  const std::uint64_t z = ((v & hi) ^ zeros) | (((v + 0x0606060606060606ull) & hi) ^ zeros);
+  return z ? static_cast<unsigned>(__builtin_ctzll(z)) >> 3 : 8u;
+}
+
+// Value of the first k (1..8) digits of v: shift them to the top, pad with '0's.
+inline std::uint64_t digits_value(std::uint64_t v, unsigned k) {
+  const unsigned shift = (8 - k) * 8;
+  if (shift) v = (v << shift) | (0x3030303030303030ull >> (64 - shift));
+  return fast_float::parse_eight_digits_unrolled(v);
+}
+
+inline constexpr std::uint64_t kPow10[9] = {1, 10, 100, 1000, 10000, 100000, 1000000,
+                                            10000000, 100000000};
+
+// Appends the fraction digits at f (up to 3 chunks of 8) to w; returns how many there were,
+// or 0 when the fast path cannot take them (no digit, or more than 19 digits in all).
+inline unsigned append_fraction(const char* f, unsigned int_digits, std::uint64_t& w) {
+  unsigned total = 0;
+  for (int chunk = 0; chunk < 3; ++chunk) {
+    const std::uint64_t v = load8(f + total);
+    const unsigned k = digit_run(v);
+    if (int_digits + total + k > 19) return 0;  // w would overflow
+    if (k < 8) {
+      if (k) w = w * kPow10[k] + digits_value(v, k);
+      return total + k;
+    }
+    w = w * 100000000ull + fast_float::parse_eight_digits_unrolled(v);
+    total += 8;
+  }
+  return 0;
+}
+
+[[gnu::always_inline]] inline bool parse_float(const char*& p, const char* end, float& out) {
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+  if (end - p < 48) return parse_float_generic(p, end, out);  // loads read < 48 bytes ahead
+  const char* s = p + (*p == '-');
+  const std::uint64_t head = load8(s);
+  const unsigned ki = digit_run(head);  // integer digits
+  if (ki == 0 || ki == 8 || s[ki] != '.') return parse_float_generic(p, end, out);
+  std::uint64_t w = digits_value(head, ki);
+  const unsigned kf = append_fraction(s + ki + 1, ki, w);
+  const char* stop = s + ki + 1 + kf;
+  if (kf == 0 || *stop == 'e' || *stop == 'E') return parse_float_generic(p, end, out);
+  float v = 0;
+  if (w != 0) {
+    const auto am =
+        fast_float::compute_float<fast_float::binary_format<float>>(-static_cast<std::int64_t>(kf), w);
+    if (am.power2 < 0) return parse_float_generic(p, end, out);  // needs the slow path
+    fast_float::to_float(false, am, v);
+  }
+  out = *p == '-' ? -v : v;
+  p = stop;
+  return true;
+#else
+  return parse_float_generic(p, end, out);
+#endif
+}
+
+// "[a, b, ...]" with exactly n numbers (bare nan/inf allowed) -> out[0..n).
+inline bool scan_numbers(const char*& p, const char* end, float* out, int n) {
+  if (p == end || *p != '[') return false;
+  ++p;
+  for (int i = 0; i < n; ++i) {
+    p = skip_spaces(p, end);
+    if (!parse_float(p, end, out[i])) return false;
+    p = skip_spaces(p, end);
+    if (p == end || *p != (i + 1 < n ? ',' : ']')) return false;
+    ++p;
+  }
+  return true;
+}
+
+// "[[...], [...], ...]" with exactly `outer` lists of `inner` numbers.
+inline bool scan_nested(const char*& p, const char* end, float* out, int outer, int inner) {
+  if (p == end || *p != '[') return false;
+  ++p;
+  for (int j = 0; j < outer; ++j) {
+    p = skip_spaces(p, end);
+    if (!scan_numbers(p, end, out + static_cast<std::ptrdiff_t>(j) * inner, inner)) return false;
+    p = skip_spaces(p, end);
+    if (p == end || *p != (j + 1 < outer ? ',' : ']')) return false;
+    ++p;
+  }
+  return true;
+}
+
+// A list cell. Every list here has at least two numbers, hence a comma, so pandas always
+// quoted it; an unquoted list would be several CSV cells and is rejected. An empty cell (or
+// "") reads as NaNs: missing data.
+inline bool scan_list_cell(const char*& p, const char* end, const ColumnSpec& s, float* out) {
+  if (p == end || *p == ',' || (end - p >= 2 && p[0] == '"' && p[1] == '"')) {
+    p += (p < end && *p == '"') ? 2 : 0;
+    std::fill(out, out + s.numbers(), std::numeric_limits<float>::quiet_NaN());
+    return true;
+  }
+  if (*p != '"') return false;
+  const char* q = p + 1;
+  const bool ok = s.outer ? scan_nested(q, end, out, s.outer, s.inner)
+                          : scan_numbers(q, end, out, s.inner);
+  if (!ok || q == end || *q != '"') return false;
+  p = q + 1;
+  return true;
+}
+
+// An integer; pandas writes "600.0" for an int column that held a NaN, so ".0" is allowed.
+inline bool scan_int_cell(const char*& p, const char* end, std::int64_t* out) {
+  const auto r = std::from_chars(p, end, *out);
+  if (r.ec != std::errc()) return false;
+  p = r.ptr;
+  if (p < end && *p == '.') {
+    ++p;
+    while (p < end && *p == '0') ++p;
+  }
+  return true;
+}
+
+inline bool starts_with(const char* p, const char* end, const char* word, std::size_t n) {
+  return static_cast<std::size_t>(end - p) >= n && std::memcmp(p, word, n) == 0;
+}
+
+// True/False as pandas writes them (also true/TRUE, and 1/0/1.0/0.0 from a float column);
+// empty = missing.
+inline bool scan_bool_cell(const char*& p, const char* end, std::uint8_t* v, std::uint8_t* ok) {
+  *ok = 1;
+  for (const char* w : {"True", "true", "TRUE", "1.0", "1"})
+    if (starts_with(p, end, w, std::strlen(w))) {
+      *v = 1;
+      p += std::strlen(w);
+      return true;
+    }
+  for (const char* w : {"False", "false", "FALSE", "0.0", "0"})
+    if (starts_with(p, end, w, std::strlen(w))) {
+      *v = 0;
+      p += std::strlen(w);
+      return true;
+    }
+  *v = 0;
+  *ok = 0;
+  return p == end || *p == ',';
+}
+
+// A string cell, quoted (with "" escapes) or not. `raw` is the text between the quotes;
+// `escaped` tells whether it still holds "" pairs.
+inline bool scan_string_cell(const char*& p, const char* end, std::string_view& raw,
+                             bool& escaped) {
+  escaped = false;
+  if (p < end && *p == '"') {
+    const char* s = p + 1;
+    const char* q = s;
+    for (;;) {
+      q = static_cast<const char*>(std::memchr(q, '"', static_cast<std::size_t>(end - q)));
+      if (!q) return false;
+      if (q + 1 < end && q[1] == '"') {
+        escaped = true;
+        q += 2;
+        continue;
+      }
+      break;
+    }
+    raw = std::string_view(s, static_cast<std::size_t>(q - s));
+    p = q + 1;
+    return true;
+  }
+  const char* c = static_cast<const char*>(std::memchr(p, ',', static_cast<std::size_t>(end - p)));
+  if (!c) c = end;
+  raw = std::string_view(p, static_cast<std::size_t>(c - p));
+  p = c;
+  return true;
+}
+
+inline std::string unescape_quotes(std::string_view raw) {
+  std::string s;
+  s.reserve(raw.size());
+  for (std::size_t i = 0; i < raw.size(); ++i) {
+    s += raw[i];
+    if (raw[i] == '"' && i + 1 < raw.size() && raw[i + 1] == '"') ++i;
+  }
+  return s;
+}
+
+}  // namespace bsp::csv_detail
