@@ -1,0 +1,80 @@
+"""Command line of bsp-check (console script ``bsp-check``)."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+EXIT_CLEAN, EXIT_PROBLEMS, EXIT_USAGE = 0, 1, 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="bsp-check",
+        description="Check a CARLA-BSP dataset: files referenced by data.csv that are "
+                    "missing and media files no row references; per recording the MP4 and "
+                    "APNG frame counts against the largest frame.idx, rows whose "
+                    "in_segmentation disagrees with the mask, recordings whose pedestrian is "
+                    "never visible in the masks, annotated rows with no pedestrian pixel "
+                    "near the joints, duplicate rows and gaps in frame.idx; and the "
+                    "statistics table (scenes, annotated and crossing frames per age and "
+                    "gender, annotated share). Each segmentation file is decoded once, files "
+                    "spread over threads.",
+        epilog="Exit codes: 0 clean, 1 problems found (or data.csv unreadable), 2 bad "
+               "arguments (missing dataset, --fix directory exists or overlaps the dataset). "
+               "Gaps in frame.idx and event-camera files are notes, not problems.")
+    p.add_argument("dataset", metavar="DATASET",
+                   help="dataset directory holding data.csv (or the data.csv itself)")
+    p.add_argument("--json", metavar="REPORT.json",
+                   help="also write the full report (every finding with its data.csv lines, "
+                        "the per-recording table, the statistics) as JSON")
+    p.add_argument("--fix", metavar="OUT_DIR",
+                   help="write a cleaned copy to OUT_DIR (never in place): without broken or "
+                        "never-visible recordings, duplicate rows and fully occluded rows; "
+                        "every kept file and data.csv line byte-identical; OUT_DIR/"
+                        "bsp-check-fix.tsv lists what was dropped and why")
+    p.add_argument("--link", action="store_true",
+                   help="with --fix: hard-link the kept media files instead of copying them")
+    p.add_argument("--force", action="store_true",
+                   help="with --fix: replace OUT_DIR if it exists")
+    p.add_argument("--threads", type=int, metavar="N",
+                   help="files decoded at once (default: all cores)")
+    p.add_argument("--quiet", action="store_true",
+                   help="print only the verdict line (and errors), no progress bar")
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:
+        return EXIT_USAGE if e.code else EXIT_CLEAN
+    from . import check_dataset, fix_dataset, format_report, to_json
+
+    if (args.link or args.force) and not args.fix:
+        print("bsp-check: --link and --force only apply with --fix", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        if args.fix:
+            report = fix_dataset(args.dataset, args.fix, threads=args.threads,
+                                 force=args.force, link=args.link, progress=not args.quiet)
+        else:
+            report = check_dataset(args.dataset, threads=args.threads,
+                                   progress=not args.quiet)
+    except (FileNotFoundError, FileExistsError, ValueError) as e:
+        print(f"bsp-check: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("bsp-check: interrupted", file=sys.stderr)
+        return 130
+    if args.json:
+        to_json(report, args.json)
+    text = format_report(report)
+    if args.quiet:
+        text = text.rstrip("\n").rsplit("\n", 1)[-1] + "\n"
+    sys.stdout.write(text)
+    return EXIT_CLEAN if report["clean"] else EXIT_PROBLEMS
+
+
+if __name__ == "__main__":
+    sys.exit(main())
