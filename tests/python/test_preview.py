@@ -1,0 +1,200 @@
+"""bsp-preview on a generated sample: sizes, skeleton pixels on the projected joints,
+segmentation colours, MP4 frame counts, the 3D and predictions views, exit codes."""
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+import bsp_fast as bf
+from bsp_fast.media import ApngReader, VideoReader
+from bsp_fast.preview import (preview_clips, preview_frames, preview_pose3d,
+                              preview_predictions)
+from bsp_fast.preview.cli import main
+
+# The documented colours (RGB): left blue, right orange, centre green; truth / prediction.
+LEFT, RIGHT, CENTRE = (0, 170, 255), (255, 140, 0), (60, 230, 60)
+TRUTH, PREDICTION = (60, 230, 60), (255, 0, 255)
+CAPTION = 14  # caption bar height per text line
+W, H = 640, 240
+
+
+def side_colour(j: int):
+    name = bf.skeleton.JOINT_NAMES[j]
+    return LEFT if name.endswith("__L") else RIGHT if name.endswith("__R") else CENTRE
+
+
+@pytest.fixture(scope="module")
+def sample(tmp_path_factory):
+    from bsp_fast.synth import generate
+
+    root = tmp_path_factory.mktemp("preview")
+    generate(root / "ds", "sample", workers=2, progress=False)
+    bf.convert(root / "ds", root / "clips.h5", clip_length=10)
+    return root
+
+
+def _read(png):
+    import cv2
+
+    img = cv2.imread(str(png), cv2.IMREAD_COLOR)
+    return img[..., ::-1]
+
+
+def _separated(uv, far=5.0):
+    """Joints at least `far` px from every other joint (their disc is theirs alone)."""
+    d = np.linalg.norm(uv[:, None] - uv[None], axis=-1)
+    d[np.arange(len(uv)), np.arange(len(uv))] = np.inf
+    return [j for j in range(len(uv)) if d[j].min() >= far]
+
+
+def _disc(img, x, y, colour) -> bool:
+    """The joint's disc (radius 2) is centred on pixel (x, y): its centre and its four
+    extreme pixels have the colour (a disc 1 px off leaves one extreme pixel out)."""
+    return all(tuple(img[y + dy, x + dx]) == colour
+               for dx, dy in ((0, 0), (-2, 0), (2, 0), (0, -2), (0, 2)))
+
+
+def _best_frame(ds):
+    """Row of recording 0 with the largest skeleton fully inside the image."""
+    t = bf.read_csv(ds / "data.csv")
+    rid = t["id"][0]
+    rows = np.flatnonzero(t["id"] == rid)
+    uv = t["frame.pedestrian.pose.camera"][rows]
+    inside = ((uv >= 0) & (uv < [W, H])).all((1, 2))
+    height = np.where(inside, np.ptp(uv[..., 1], axis=1), -1)
+    return t, rows[int(np.argmax(height))]
+
+
+def test_frames_png_skeleton_on_projected_joints(sample, tmp_path):
+    t, row = _best_frame(sample / "ds")
+    f = int(t["frame.idx"][row])
+    out = tmp_path / "f.png"
+    res = preview_frames(sample / "ds", 0, out, frames=f"{f},{f + 1}")
+    img = _read(out)
+    assert img.shape == (2 * (CAPTION + H) + 2, 2 * W, 3) and res["size"] == (2 * W, img.shape[0])
+    # Independent projection of the world pose through the CSV's camera (fov 90).
+    uv = bf.project(t["frame.pedestrian.pose.world"][row][:, :3], t["camera.transform"][row],
+                    W, H, fov=90.0)
+    assert np.abs(uv - t["frame.pedestrian.pose.camera"][row]).max() < 1e-2
+    good = _separated(uv)
+    sides = {side_colour(j) for j in good}
+    assert len(good) >= 4 and LEFT in sides and RIGHT in sides, good
+    for j in good:
+        x, y = int(np.floor(uv[j, 0])), int(np.floor(uv[j, 1]))
+        assert _disc(img[CAPTION:], x, y, side_colour(j)), bf.skeleton.JOINT_NAMES[j]
+        assert _disc(img[CAPTION:, W:], x, y, side_colour(j))  # segmentation panel too
+    # Away from the drawing: the RGB panel is the video frame, the other the Cityscapes
+    # colours of the segmentation's tags.
+    frame = VideoReader(sample / "ds" / t["camera.recording"][row]).read([f])[0]
+    tags = ApngReader(sample / "ds" / t["camera.semantic_segmentation"][row])[f]
+    assert np.array_equal(img[CAPTION, :W], frame[0])
+    assert np.array_equal(img[CAPTION, W:], bf.media.CITYSCAPES_PALETTE[tags[0]])
+    assert (tags[0] == 13).any() and tuple(img[CAPTION, W + np.argmax(tags[0] == 13)]) == \
+        (70, 130, 180)  # sky
+
+
+def test_frames_mp4_and_layouts(sample, tmp_path):
+    out = tmp_path / "f.mp4"
+    res = preview_frames(sample / "ds", 1, out, frames="0:30:3")
+    r = VideoReader(out)
+    assert len(r) == 10 == res["frames"] and r.size == (2 * W, CAPTION + H)
+    blend = preview_frames(sample / "ds", 1, None, frames="5", layout="blend", scale=0.5)
+    assert blend["images"][0].shape == (CAPTION + H // 2, W // 2, 3)
+    rgb = preview_frames(sample / "ds", 1, tmp_path / "r.png", frames="5,6,7,8", layout="rgb",
+                         cols=2)
+    assert rgb["size"] == (2 * W + 2, 2 * (CAPTION + H) + 2)
+    with pytest.raises(ValueError, match="layout must be one of side, blend, rgb"):
+        preview_frames(sample / "ds", 1, None, layout="mosaic")
+
+
+def test_clips_sheet_crops_with_skeleton(sample, tmp_path):
+    out = tmp_path / "c.png"
+    res = preview_clips(sample / "clips.h5", out, n=5, size=96, cols=3, frame="first")
+    img = _read(out)
+    assert img.shape == (2 * (3 * CAPTION + 96) + 2, 3 * 96 + 2 * 2, 3) and res["media"]
+    with h5py.File(sample / "clips.h5", "r") as f:
+        g = f["train"]
+        ok = 0
+        for i in range(5):
+            row = g["clip_frames"][i, 0]
+            u0, v0, u1, v1 = g["frames/crop_box"][row]
+            vis = g["frames/joint_visible"][row]
+            p = (g["projection_2d"][i, 0] - [u0, v0]) * (96 / (u1 - u0))
+            c, r = i % 3, i // 3
+            for j in _separated(p):
+                if not vis[j]:
+                    continue
+                x, y = int(np.floor(p[j, 0])), int(np.floor(p[j, 1]))
+                panel = img[r * (3 * CAPTION + 96 + 2) + 3 * CAPTION:, c * 98:]
+                assert _disc(panel, x, y, side_colour(j))
+                ok += 1
+    assert ok >= 10
+    sheet = preview_clips(sample / "clips.h5", tmp_path / "c.mp4", split="val", n=4, size=64)
+    assert len(VideoReader(tmp_path / "c.mp4")) == 10 == sheet["frames"]
+
+
+def test_pose3d_png_and_mp4(sample, tmp_path):
+    res = preview_pose3d(sample / "clips.h5", 0, tmp_path / "p.png", size="600x300")
+    img = _read(tmp_path / "p.png")
+    assert img.shape == (300, 600, 3) and res["size"] == (600, 300)
+    for colour in (LEFT, RIGHT, CENTRE):  # bones in the side colours (antialiased lines)
+        assert (np.abs(img.astype(int) - colour).max(-1) < 40).sum() > 20
+    preview_pose3d(sample / "clips.h5", 1, tmp_path / "p.mp4", split="test", space="world")
+    assert len(VideoReader(tmp_path / "p.mp4")) == 10
+    assert VideoReader(tmp_path / "p.mp4").size == (800, 400)
+
+
+def _write_preds(path, task, pred, target, units):
+    with h5py.File(path, "w") as f:
+        f.attrs.update(task=task, units=units)
+        names = {"autoencoder": ("pixels", "target_pixels"),
+                 "lifting": ("metres_aligned", "target_metres")}.get(task, ("a", "b"))
+        f[names[0]], f[names[1]] = pred, target
+        f["label"] = np.arange(len(pred)) % 2
+        f["clip_id"] = np.arange(len(pred))
+        f["video_id"] = np.array([f"clips/{k:08d}-0-0" for k in range(len(pred))],
+                                 dtype=h5py.string_dtype())
+
+
+def test_predictions_2d_and_3d(sample, tmp_path):
+    with h5py.File(sample / "clips.h5", "r") as f:
+        gt2 = f["test/projection_2d"][:3].astype(np.float32)
+        gt3 = f["test/targets/absolute_pose_loc"][:2]
+    p2 = tmp_path / "ae.h5"
+    _write_preds(p2, "autoencoder", gt2 + 6.0, gt2, "pixels")
+    res = preview_predictions(p2, tmp_path / "ae.png", size=100, cols=3)
+    img = _read(tmp_path / "ae.png")
+    assert img.shape == (3 * CAPTION + 100, 3 * 100 + 2 * 2, 3)
+    assert res["datasets"] == ["pixels", "target_pixels"]
+    for colour in (TRUTH, PREDICTION):
+        assert (img == colour).all(-1).sum() > 30
+    p3 = tmp_path / "lift.h5"
+    _write_preds(p3, "lifting", gt3 + 0.05, gt3, "metres")
+    out = preview_predictions(p3, tmp_path / "lift.mp4", clip=1)
+    assert out["frames"] == 10 and len(VideoReader(tmp_path / "lift.mp4")) == 10
+    bad = tmp_path / "cls.h5"
+    with h5py.File(bad, "w") as f:
+        f.attrs["task"] = "classification"
+    assert main(["predictions", str(bad), "--out", str(tmp_path / "x.png")]) == 2
+    wrong = tmp_path / "wrong.h5"
+    _write_preds(wrong, "pose_estimation", gt2, gt2, "pixels")
+    with pytest.raises(ValueError, match="needs datasets crop_pixels \\+ target_crop_pixels"):
+        preview_predictions(wrong)
+
+
+def test_cli_exit_codes(sample, tmp_path, capsys):
+    out = tmp_path / "x.png"
+    assert main(["frames", str(sample / "ds"), "--recording", "0", "--out", str(out),
+                 "--frames", "10"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    assert main(["frames", str(sample / "ds"), "--recording", "0", "--out", str(out)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["frames", str(sample / "ds"), "--recording", "nope", "--out",
+                 str(tmp_path / "y.png")]) == 2
+    assert "is not an id" in capsys.readouterr().err
+    assert main(["clips", str(sample / "clips.h5"), "--out", str(tmp_path / "y.gif")]) == 2
+    assert main(["pose3d", str(sample / "clips.h5"), "--clip", "9999", "--out",
+                 str(tmp_path / "y.png")]) == 2
+    assert main(["--help"]) == 0
+    assert main(["frames"]) == 2
