@@ -6,6 +6,8 @@
     python -m bsp_fast train ...        same as bsp-train
     python -m bsp_fast eval ...         same as bsp-eval
     python -m bsp_fast predict ...      same as bsp-predict
+    python -m bsp_fast preview ...      same as bsp-preview
+    python -m bsp_fast check ...        same as bsp-check
 """
 from __future__ import annotations
 
@@ -36,6 +38,11 @@ def main(argv=None) -> int:
 
         module = importlib.import_module(f"bsp_fast.training.{training[argv[0]]}")
         return module.main(argv[1:])
+    tools = {"preview": "bsp_fast.preview.cli", "check": "bsp_fast.check.cli"}
+    if argv and argv[0] in tools:
+        import importlib
+
+        return importlib.import_module(tools[argv[0]]).main(argv[1:])
     if not argv or argv[0] in ("--version", "-V", "version"):
         return _versions()
     print(__doc__.strip(), file=sys.stderr if argv[0] not in ("-h", "--help") else sys.stdout)
