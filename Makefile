@@ -3,6 +3,8 @@
 SHELL := /bin/bash
 PY = $$(cat build/.python)
 WERROR ?= OFF
+# C++ unit tests (doctest): off for a plain install, on for `make test`.
+TESTS ?= OFF
 
 .PHONY: all deps install test test-cpp test-python demo bench clean
 all: install
@@ -13,13 +15,15 @@ deps:
 install: deps
 	@echo "building and installing bsp_fast (C++ core, incremental in build/wheel)"
 	@$(PY) -m pip install -q --no-build-isolation --no-deps \
-	    -Ccmake.define.BSP_WERROR=$(WERROR) . 
+	    -Ccmake.define.BSP_WERROR=$(WERROR) -Ccmake.define.BSP_TESTS=$(TESTS) .
 
-test: install
+test: deps
+	@$(MAKE) --no-print-directory install TESTS=ON
 	@$(MAKE) --no-print-directory test-cpp test-python
 
+# --no-tests=error: a build without the C++ tests (TESTS=OFF) fails here instead of passing.
 test-cpp:
-	ctest --test-dir build/wheel --output-on-failure -j2
+	ctest --test-dir build/wheel --output-on-failure --no-tests=error -j2
 
 test-python:
 	$(PY) -m pytest -q tests/python

@@ -1,5 +1,4 @@
 #include <doctest/doctest.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -11,90 +10,25 @@
 #include <string>
 #include <vector>
 
-#include "csv/csv_internal.hpp"  // white-box: the number fast path
-#include "bsp/csv/csv.hpp"
 #include "bsp/common/errors.hpp"
+#include "bsp/csv/columns.hpp"
+#include "bsp/csv/csv.hpp"
+#include "csv/csv_internal.hpp"  // white-box: the number fast path
+#include "pyfloat_repr_cases.hpp"
+#include "testing.hpp"
 
 using namespace bsp;
+using bsp::testing::kReprCases;
+using bsp::testing::ReprCase;
+using bsp::testing::TempDir;
 namespace fs = std::filesystem;
 
 namespace {
-
-// Python's repr() of doubles, generated once with python3 (struct.pack('<d', v)).
-struct ReprCase {
-  unsigned long long bits;
-  const char* repr;
-};
-const ReprCase kReprCases[] = {
-    {0x0000000000000000ULL, "0.0"},
-    {0x8000000000000000ULL, "-0.0"},
-    {0x3ee4f8b588e368f1ULL, "1e-05"},
-    {0x3f1a36e2eb1c432dULL, "0.0001"},
-    {0x4341c37937e08000ULL, "1e+16"},
-    {0x42dc12218377de40ULL, "123456789012345.0"},
-    {0x43118b54f22aeb00ULL, "1234567890123456.0"},
-    {0x4341c37937e07fffULL, "9999999999999998.0"},
-    {0x3ff19999a0000000ULL, "1.100000023841858"},  // 1.1f widened
-    {0xc020428f60000000ULL, "-8.130000114440918"},
-    {0x4056800000000000ULL, "90.0"},
-    {0xc056800000000000ULL, "-90.0"},
-    {0x3fe0000000000000ULL, "0.5"},
-    {0x3ff8000000000000ULL, "1.5"},
-    {0x4059000000000000ULL, "100.0"},
-    {0x3f23a92a30553262ULL, "0.00015000000000000001"},
-    {0x3f202e4b6ce5dc68ULL, "0.00012345"},
-    {0x7ff8000000000000ULL, "nan"},
-    {0xfff8000000000000ULL, "nan"},  // -nan prints as nan too
-    {0x7ff0000000000000ULL, "inf"},
-    {0xfff0000000000000ULL, "-inf"},
-    {0x0000000000000001ULL, "5e-324"},  // subnormals
-    {0x0010000000000000ULL, "2.2250738585072014e-308"},
-    {0x36a0000000000000ULL, "1.401298464324817e-45"},  // smallest float32 subnormal
-    {0x37a16c2000000000ULL, "9.99994610111476e-41"},   // 1e-40f widened
-    {0x7fefffffffffffffULL, "1.7976931348623157e+308"},
-    {0x4480f0cf064dd592ULL, "1e+22"},
-    {0x54b249ad2594c37dULL, "1e+100"},
-    {0x2b2bff2ee48e0530ULL, "1e-100"},
-    {0x405edd2f1a9fbe77ULL, "123.456"},
-    {0x3fb999999999999aULL, "0.1"},
-    {0x3fd5555555555555ULL, "0.3333333333333333"},
-    {0x3fb99999a0000000ULL, "0.10000000149011612"},
-    {0x4341c37940000000ULL, "1.0000000272564224e+16"},
-    {0x47efffffe0000000ULL, "3.4028234663852886e+38"},
-    {0x41678c29c0000000ULL, "12345678.0"},
-    {0x4340000000000000ULL, "9007199254740992.0"},
-    {0x43b0000000000000ULL, "1.152921504606847e+18"},
-    {0x41807a8ea0000000ULL, "34558420.0"},
-    {0x412912e440000000ULL, "821618.125"},
-    {0x3e962cdda0000000ULL, "3.304370750356611e-07"},
-    {0xbe4bfc2ec0000000ULL, "-1.3031572265731484e-08"},
-    {0x42d495dd60000000ULL, "90535586955264.0"},
-    {0x4224c93300000000ULL, "44637454336.0"},
-    {0xc29388c440000000ULL, "-5369532252160.0"},
-    {0x40ec5ffa00000000ULL, "58111.8125"},
-};
 
 std::string pyfloat(double v) {
   char buf[kPyFloatMaxChars];
   return std::string(buf, format_pyfloat(v, buf));
 }
-
-// A scratch directory removed at the end of each test.
-struct TempDir {
-  fs::path dir;
-  TempDir() {
-    static int n = 0;
-    dir = fs::temp_directory_path() /
-          ("bsp_test_csv_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::create_directories(dir);
-  }
-  ~TempDir() { fs::remove_all(dir); }
-  std::string write(const std::string& name, const std::string& text) const {
-    const std::string p = (dir / name).string();
-    std::ofstream(p, std::ios::binary) << text;
-    return p;
-  }
-};
 
 std::string number_list(std::size_t n, float base) {
   std::string s = "[";
@@ -414,4 +348,74 @@ TEST_CASE("read_pose_csv reports its progress in rows") {
     CHECK(total.load() == 700);
     CHECK(done.load() == 700);
   }
+}
+
+TEST_CASE("pose_column: each column's kind, shape and PoseTable member, by name or index") {
+  CHECK(pose_csv_column_index("id") == 0);
+  CHECK(pose_csv_column_index("frame.pedestrian.is_crossing") == 20);
+  CHECK(pose_csv_column_index(kCrossingAlias) == 20);
+  CHECK(pose_csv_column_index("no.such.column") == -1);
+  PoseTable t;
+  const PoseColumn uv = pose_column(t, "frame.pedestrian.pose.camera");
+  CHECK(uv.floats == &t.pose_camera);
+  CHECK((!uv.strings && !uv.ints && !uv.bools && !uv.valid));
+  CHECK(uv.spec->kind == CsvKind::floats);
+  CHECK(uv.spec->numbers() == 52);
+  CHECK(uv.spec->shape(5) == std::vector<std::size_t>{5, 26, 2});
+  CHECK(pose_column(t, "camera.transform").spec->shape(5) == std::vector<std::size_t>{5, 6});
+  const PoseColumn crossing = pose_column(t, kCrossingAlias);
+  CHECK(std::string(crossing.spec->name) == "frame.pedestrian.is_crossing");
+  CHECK((crossing.bools == &t.is_crossing && crossing.valid == &t.is_crossing_valid));
+  CHECK(crossing.spec->shape(5) == std::vector<std::size_t>{5});
+  CHECK(pose_column(t, "id").strings == &t.id);
+  CHECK(pose_column(t, "pedestrian.gender").strings == &t.gender);
+  CHECK(pose_column(t, "frame.idx").ints == &t.frame_idx);
+  // Every column has its own member and the kind its spec says, in kPoseCsvColumns order.
+  std::vector<const void*> homes;
+  for (std::size_t c = 0; c < kPoseCsvColumnCount; ++c) {
+    const PoseColumn col = pose_column(t, c);
+    CHECK(std::string(col.spec->name) == kPoseCsvColumns[c]);
+    const CsvKind kind = col.spec->kind;
+    CHECK((col.strings != nullptr) == (kind == CsvKind::string));
+    CHECK((col.ints != nullptr) == (kind == CsvKind::integer));
+    CHECK((col.floats != nullptr) == (kind == CsvKind::floats));
+    CHECK(((col.bools != nullptr) && (col.valid != nullptr)) == (kind == CsvKind::boolean));
+    homes.push_back(col.strings ? static_cast<const void*>(col.strings)
+                    : col.ints  ? static_cast<const void*>(col.ints)
+                    : col.floats ? static_cast<const void*>(col.floats)
+                                 : static_cast<const void*>(col.bools));
+  }
+  std::sort(homes.begin(), homes.end());
+  CHECK(std::unique(homes.begin(), homes.end()) == homes.end());
+  CHECK_THROWS_AS(pose_column(t, std::size_t{24}), std::out_of_range);
+  CHECK_THROWS_WITH_AS(pose_column(t, "no.such.column"),
+                       doctest::Contains("unknown column 'no.such.column'; allowed: id, "),
+                       std::invalid_argument);
+}
+
+TEST_CASE("UTF-8 check: Python's strict decoder's rules, and the first bad string is named") {
+  for (const char* ok : {"plain", "caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x9a\xb6", "\xc2\x80",
+                         "\xe0\xa0\x80", "\xed\x9f\xbf", "\xee\x80\x80", "\xf0\x90\x80\x80",
+                         "\xf4\x8f\xbf\xbf"})
+    CHECK_MESSAGE(is_valid_utf8(ok), ok);
+  CHECK(is_valid_utf8(std::string("a\0b", 3)));
+  // Truncated, stray continuation, overlong, surrogate, above U+10FFFF, bad continuation.
+  for (const char* bad : {"\xc3", "\xe2\x82", "\x80", "\xc0\xaf", "\xe0\x80\xaf",
+                          "\xf0\x8f\xbf\xbf", "\xed\xa0\x80", "\xf4\x90\x80\x80",
+                          "\xf8\x88\x80\x80\x80", "\xe2\x28\xa1"})
+    CHECK_FALSE_MESSAGE(is_valid_utf8(bad), bad);
+  TempDir tmp;
+  std::vector<std::string> bad_row = row_cells(1);
+  bad_row[7] = "walker\xff";  // pedestrian.model
+  const std::string path = tmp.write("data.csv", header_line() + join(row_cells(0)) + join(bad_row));
+  const PoseTable t = read_pose_csv(path);  // bytes are kept as they are
+  CHECK(t.model.values[1] == "walker\xff");
+  CHECK_THROWS_WITH_AS(check_utf8(t),
+                       (path + ", column 'pedestrian.model': value 'walker\\xff' is not valid UTF-8")
+                           .c_str(),
+                       CsvParseError);
+  CsvReadOptions numbers_only;
+  numbers_only.columns = {"frame.idx"};
+  numbers_only.check_duplicates = false;
+  check_utf8(read_pose_csv(path, numbers_only));  // no string column was read: nothing to check
 }

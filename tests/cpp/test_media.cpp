@@ -8,10 +8,10 @@
 #include <string>
 #include <vector>
 
-#include "bsp/media/apng.hpp"
 #include "bsp/common/errors.hpp"
-#include "media/png.hpp"  // white-box: PNG filters and blending
+#include "bsp/media/apng.hpp"
 #include "bsp/media/video.hpp"
+#include "media/png.hpp"  // white-box: PNG filters and blending
 
 using namespace bsp;
 namespace fs = std::filesystem;

@@ -231,6 +231,16 @@ def test_error_wrong_cell_count_and_bad_values(tmp_path):
                              "True, False or an empty cell, found 'maybe'")
 
 
+def test_error_string_not_utf8(tmp_path):
+    p = write_text(tmp_path / "u.csv", [cells_of(1), cells_of(2)])
+    data = open(p, "rb").read()
+    open(p, "wb").write(data.replace(b"walker.pedestrian.0001", b"walker\xff", 1))
+    assert error_text(p) == (f"{p}, column 'pedestrian.model': value 'walker\\xff' is not valid "
+                             "UTF-8")
+    # Only the columns that are read are decoded.
+    assert len(bsp_fast.read_csv(p, columns=["frame.idx"], check_duplicates=False)) == 2
+
+
 # ----------------------------------------------------------------- writing
 SPECIAL = np.float32([0.0, -0.0, 1e-05, 1e-4, 1e16, 1.1, -8.13, 90.0, np.nan, np.inf, -np.inf,
                       1e-40, 3.4e38, 123456789.0])

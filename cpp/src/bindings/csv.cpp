@@ -1,42 +1,20 @@
 // data.csv reader/writer bindings. The reader's columns are handed to numpy without a copy
 // (each array owns its std::vector through a capsule); bsp_fast/csvio.py wraps the result.
-#include "../csv/csv_internal.hpp"
+#include "bsp/csv/columns.hpp"
 #include "bsp/csv/csv.hpp"
-#include "bsp/common/errors.hpp"
 #include "common.hpp"
 
 namespace bsp::py_bind {
 namespace {
-namespace cd = bsp::csv_detail;
 
 // A numpy array owning `v` (moved to the heap); `dt` may reinterpret it (uint8 -> bool).
 template <class T>
-py::array take(std::vector<T>&& v, std::vector<py::ssize_t> shape,
+py::array take(std::vector<T>&& v, const std::vector<std::size_t>& shape,
                const py::dtype& dt = py::dtype::of<T>()) {
   auto* owner = new std::vector<T>(std::move(v));
   py::capsule cap(owner, [](void* p) { delete static_cast<std::vector<T>*>(p); });
-  return py::array(dt, std::move(shape), {}, owner->data(), cap);
-}
-
-std::vector<py::ssize_t> shape_of(const cd::ColumnSpec& s, std::size_t rows) {
-  const auto n = static_cast<py::ssize_t>(rows);
-  if (s.kind != cd::Kind::floats) return {n};
-  if (s.outer) return {n, s.outer, s.inner};
-  return {n, s.inner};
-}
-
-py::list strings(const std::vector<std::string>& values, const PoseTable& t, const char* col) {
-  py::list out;
-  for (const std::string& v : values) {
-    PyObject* s = PyUnicode_DecodeUTF8(v.data(), static_cast<py::ssize_t>(v.size()), "strict");
-    if (!s) {
-      PyErr_Clear();
-      throw CsvParseError(t.path + ", column '" + col + "': value " + cd::snippet(v) +
-                          " is not valid UTF-8");
-    }
-    out.append(py::reinterpret_steal<py::str>(s));
-  }
-  return out;
+  return py::array(dt, std::vector<py::ssize_t>(shape.begin(), shape.end()), {}, owner->data(),
+                   cap);
 }
 
 py::dict read_pose_csv_py(const std::string& path, const std::vector<std::string>& columns,
@@ -49,28 +27,27 @@ py::dict read_pose_csv_py(const std::string& path, const std::vector<std::string
   {
     py::gil_scoped_release nogil;
     t = read_pose_csv(path, opt);
+    check_utf8(t);  // the strings below become str
   }
   py::dict data, valid, strs;
   for (const std::string& name : t.columns_present) {
-    const int c = cd::column_index(name);
-    const cd::ColumnSpec& s = cd::kSpecs[c];
-    const cd::ColumnRef r = cd::column_ref(t, c);
-    const auto shape = shape_of(s, t.rows);
+    const PoseColumn col = pose_column(t, name);
+    const auto shape = col.spec->shape(t.rows);
     const py::str key(name);
-    if (r.floats) data[key] = take(std::move(*r.floats), shape);
-    if (r.ints) data[key] = take(std::move(*r.ints), shape);
-    if (r.bools) {
-      data[key] = take(std::move(*r.bools), shape, py::dtype("?"));
-      valid[key] = take(std::move(*r.valid), shape, py::dtype("?"));
+    if (col.floats) data[key] = take(std::move(*col.floats), shape);
+    if (col.ints) data[key] = take(std::move(*col.ints), shape);
+    if (col.bools) {
+      data[key] = take(std::move(*col.bools), shape, py::dtype("?"));
+      valid[key] = take(std::move(*col.valid), shape, py::dtype("?"));
     }
-    if (r.str)
-      strs[key] = py::make_tuple(strings(r.str->values, t, s.name),
-                                 take(std::move(r.str->codes), shape));
+    if (col.strings)
+      strs[key] = py::make_tuple(py::cast(col.strings->values),
+                                 take(std::move(col.strings->codes), shape));
   }
   py::dict out;
   out["path"] = t.path;
   out["rows"] = t.rows;
-  out["line"] = take(std::move(t.line), {static_cast<py::ssize_t>(t.rows)});
+  out["line"] = take(std::move(t.line), {t.rows});
   out["columns"] = t.columns_present;
   out["crossing_column"] = t.crossing_column;
   out["data"] = data;
@@ -93,23 +70,23 @@ void write_pose_csv_py(const std::string& path, const py::dict& cols, std::size_
                        int threads) {
   PoseTable t;
   t.rows = rows;
-  for (int c = 0; c < static_cast<int>(kPoseCsvColumnCount); ++c) {
-    const cd::ColumnSpec& s = cd::kSpecs[c];
-    if (!cols.contains(s.name))
-      throw py::value_error(std::string("write_pose_csv: missing column '") + s.name + "'");
-    const py::handle col = cols[s.name];
-    const cd::ColumnRef r = cd::column_ref(t, c);
-    if (r.floats) *r.floats = copy_array<float>(col, s.name, rows * s.numbers());
-    if (r.ints) *r.ints = copy_array<std::int64_t>(col, s.name, rows);
-    if (r.bools) {
-      const auto pair = py::cast<py::tuple>(col);
-      *r.bools = copy_array<std::uint8_t>(pair[0], s.name, rows);
-      *r.valid = copy_array<std::uint8_t>(pair[1], s.name, rows);
+  for (std::size_t c = 0; c < kPoseCsvColumnCount; ++c) {
+    const PoseColumn col = pose_column(t, c);
+    const char* name = col.spec->name;
+    if (!cols.contains(name))
+      throw py::value_error(std::string("write_pose_csv: missing column '") + name + "'");
+    const py::handle obj = cols[name];
+    if (col.floats) *col.floats = copy_array<float>(obj, name, rows * col.spec->numbers());
+    if (col.ints) *col.ints = copy_array<std::int64_t>(obj, name, rows);
+    if (col.bools) {
+      const auto pair = py::cast<py::tuple>(obj);
+      *col.bools = copy_array<std::uint8_t>(pair[0], name, rows);
+      *col.valid = copy_array<std::uint8_t>(pair[1], name, rows);
     }
-    if (r.str) {
-      const auto pair = py::cast<py::tuple>(col);
-      r.str->values = pair[0].cast<std::vector<std::string>>();
-      r.str->codes = copy_array<std::int32_t>(pair[1], s.name, rows);
+    if (col.strings) {
+      const auto pair = py::cast<py::tuple>(obj);
+      col.strings->values = pair[0].cast<std::vector<std::string>>();
+      col.strings->codes = copy_array<std::int32_t>(pair[1], name, rows);
     }
   }
   py::gil_scoped_release nogil;

@@ -16,8 +16,8 @@
 #include <tuple>
 
 #include "bsp/geometry/camera.hpp"
-#include "convert_internal.hpp"
 #include "bsp/geometry/skeleton.hpp"
+#include "convert_internal.hpp"
 
 namespace bsp {
 namespace {

@@ -4,8 +4,8 @@
 #include <cstring>
 
 #include "bsp/media/apng.hpp"
-#include "convert_internal.hpp"
 #include "bsp/media/video.hpp"
+#include "convert_internal.hpp"
 
 namespace bsp::detail {
 namespace {

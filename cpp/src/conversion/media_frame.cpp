@@ -5,8 +5,8 @@
 #include <cstring>
 #include <opencv2/imgproc.hpp>
 
-#include "bsp/conversion/convert.hpp"
 #include "bsp/common/errors.hpp"
+#include "bsp/conversion/convert.hpp"
 
 namespace bsp {
 namespace {

@@ -9,10 +9,10 @@
 #include <map>
 #include <thread>
 
-#include "bsp/media/apng.hpp"
-#include "convert_internal.hpp"
 #include "bsp/common/parallel.hpp"
+#include "bsp/media/apng.hpp"
 #include "bsp/media/video.hpp"
+#include "convert_internal.hpp"
 
 namespace bsp::detail {
 namespace {

@@ -10,8 +10,8 @@
 #include <optional>
 #include <thread>
 
-#include "convert_internal.hpp"
 #include "bsp/common/parallel.hpp"
+#include "convert_internal.hpp"
 
 namespace bsp::detail {
 namespace {

@@ -4,9 +4,9 @@
 #include <cmath>
 #include <cstring>
 
-#include "convert_internal.hpp"
-#include "bsp/geometry/kinematics.hpp"
 #include "bsp/common/parallel.hpp"
+#include "bsp/geometry/kinematics.hpp"
+#include "convert_internal.hpp"
 
 namespace bsp::detail {
 namespace {

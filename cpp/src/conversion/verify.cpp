@@ -4,11 +4,11 @@
 #include <algorithm>
 #include <cmath>
 
-#include "bsp/geometry/camera.hpp"
-#include "convert_internal.hpp"
-#include "bsp/geometry/kinematics.hpp"
 #include "bsp/common/parallel.hpp"
+#include "bsp/geometry/camera.hpp"
+#include "bsp/geometry/kinematics.hpp"
 #include "bsp/geometry/skeleton.hpp"
+#include "convert_internal.hpp"
 
 namespace bsp::detail {
 namespace {

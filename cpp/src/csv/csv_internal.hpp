@@ -1,4 +1,4 @@
-// Internals shared by the csv_*.cpp files: the column schema and the hot-loop scanners.
+// Internals shared by the CSV reader and writer (cpp/src/csv/): the hot-loop scanners.
 // The scanners follow fast_float's discipline: they never throw or allocate, and return
 // where they stopped plus whether the cell was well-formed. Explaining a failure (what was
 // expected, what was found) is the cold path's job (explain.cpp), which re-reads the
@@ -16,36 +16,16 @@
 #include <string_view>
 #include <vector>
 
+#include "bsp/csv/columns.hpp"
 #include "bsp/csv/csv.hpp"
 
 namespace bsp::csv_detail {
 
-enum class Kind : std::uint8_t { string, integer, floats, boolean };
-
-struct ColumnSpec {
-  const char* name;
-  Kind kind;
-  std::uint16_t outer;  // lists per cell for nested cells, 0 for a flat list
-  std::uint16_t inner;  // numbers per (inner) list
-  std::size_t numbers() const { return outer ? std::size_t{outer} * inner : inner; }
-};
-
-extern const ColumnSpec kSpecs[kPoseCsvColumnCount];
 inline constexpr int kCrossingColumn = 20;
 inline constexpr int kKeyColumns[4] = {0, 2, 6, 11};  // id, camera.idx, pedestrian.idx, frame.idx
 
-// Index of a CSV column name in kPoseCsvColumns (the crossing alias maps to 20), or -1.
-int column_index(std::string_view name);
-
-// Where a column lives in a PoseTable; only the members of its kind are set.
-struct ColumnRef {
-  StringColumn* str = nullptr;
-  std::vector<std::int64_t>* ints = nullptr;
-  std::vector<float>* floats = nullptr;
-  std::vector<std::uint8_t>* bools = nullptr;
-  std::vector<std::uint8_t>* valid = nullptr;
-};
-ColumnRef column_ref(PoseTable& t, int col);
+// "a, b, ..., <alias>": the names a column selection accepts, for error messages.
+std::string allowed_columns();
 
 // "text" shortened and escaped for an error message.
 std::string snippet(std::string_view text, std::size_t max_chars = 40);
@@ -196,7 +176,7 @@ inline bool scan_nested(const char*& p, const char* end, float* out, int outer, 
 // A list cell. Every list here has at least two numbers, hence a comma, so pandas always
 // quoted it; an unquoted list would be several CSV cells and is rejected. An empty cell (or
 // "") reads as NaNs: missing data.
-inline bool scan_list_cell(const char*& p, const char* end, const ColumnSpec& s, float* out) {
+inline bool scan_list_cell(const char*& p, const char* end, const CsvColumnSpec& s, float* out) {
   if (p == end || *p == ',' || (end - p >= 2 && p[0] == '"' && p[1] == '"')) {
     p += (p < end && *p == '"') ? 2 : 0;
     std::fill(out, out + s.numbers(), std::numeric_limits<float>::quiet_NaN());

@@ -107,7 +107,7 @@ std::string check_numbers(const Item& list, std::size_t want, const std::string&
   return {};
 }
 
-std::string explain_list(std::string_view content, const ColumnSpec& spec) {
+std::string explain_list(std::string_view content, const CsvColumnSpec& spec) {
   if (trim(content).empty()) return {};
   const std::string what = spec.outer ? std::to_string(spec.outer) + " x " +
                                             std::to_string(spec.inner) + " numbers"
@@ -160,16 +160,16 @@ std::string explain_cell(std::string_view text, int col) {
     content = text.substr(1, close - 1);
   }
   if (col < 0) return {};
-  const ColumnSpec& spec = kSpecs[col];
+  const CsvColumnSpec& spec = kPoseCsvSpecs[col];
   switch (spec.kind) {
-    case Kind::string: return {};
-    case Kind::integer:
+    case CsvKind::string: return {};
+    case CsvKind::integer:
       if (text.empty()) return "expected an integer, found an empty cell";
       return is_int(text) ? std::string() : "expected an integer, found " + snippet(text);
-    case Kind::boolean:
+    case CsvKind::boolean:
       return is_bool(text) ? std::string()
                            : "expected True, False or an empty cell, found " + snippet(text);
-    case Kind::floats:
+    case CsvKind::floats:
       if (!text.empty() && text.front() != '"')
         return "expected a double-quoted list \"[...]\", found " + snippet(text);
       return explain_list(content, spec);

@@ -162,12 +162,10 @@ std::vector<std::string> split_header(std::string_view h, const std::string& pat
 std::vector<bool> wanted_columns(const CsvReadOptions& opt) {
   std::vector<bool> wanted(kPoseCsvColumnCount, opt.columns.empty());
   for (const std::string& name : opt.columns) {
-    const int c = column_index(name);
+    const int c = pose_csv_column_index(name);
     if (c < 0) {
-      std::string allowed;
-      for (const char* n : kPoseCsvColumns) allowed += std::string(allowed.empty() ? "" : ", ") + n;
       throw std::invalid_argument("read_pose_csv: unknown column '" + name + "'; allowed: " +
-                                  allowed + ", " + kCrossingAlias);
+                                  allowed_columns());
     }
     wanted[static_cast<std::size_t>(c)] = true;
   }
@@ -182,7 +180,7 @@ std::vector<int> map_header(const std::vector<std::string>& names, const std::ve
   std::vector<int> cols(names.size(), -1);
   std::vector<int> seen(kPoseCsvColumnCount, -1);
   for (std::size_t k = 0; k < names.size(); ++k) {
-    const int c = column_index(names[k]);
+    const int c = pose_csv_column_index(names[k]);
     if (c < 0) continue;  // unknown extra columns are ignored
     if (seen[static_cast<std::size_t>(c)] >= 0)
       header_error(t.path, "column '" + names[k] + "' appears twice (as '" +

@@ -19,7 +19,7 @@ enum class Action : std::uint8_t { skip, string, integer, floats, boolean };
 // What to do with one header cell, and where its values go.
 struct Target {
   Action action = Action::skip;
-  const ColumnSpec* spec = nullptr;
+  const CsvColumnSpec* spec = nullptr;
   std::size_t numbers = 0;
   float* f = nullptr;
   std::int64_t* i = nullptr;
@@ -111,26 +111,26 @@ std::vector<Target> make_targets(const std::vector<int>& cols, PoseTable& t, int
   for (std::size_t k = 0; k < cols.size(); ++k) {
     if (cols[k] < 0) continue;
     Target& g = targets[k];
-    const ColumnRef r = column_ref(t, cols[k]);
-    g.spec = &kSpecs[cols[k]];
+    const PoseColumn r = pose_column(t, static_cast<std::size_t>(cols[k]));
+    g.spec = &kPoseCsvSpecs[cols[k]];
     g.numbers = g.spec->numbers();
     switch (g.spec->kind) {
-      case Kind::floats:
+      case CsvKind::floats:
         r.floats->resize(t.rows * g.numbers);
         g.action = Action::floats, g.f = r.floats->data();
         break;
-      case Kind::integer:
+      case CsvKind::integer:
         r.ints->resize(t.rows);
         g.action = Action::integer, g.i = r.ints->data();
         break;
-      case Kind::boolean:
+      case CsvKind::boolean:
         r.bools->resize(t.rows);
         r.valid->resize(t.rows);
         g.action = Action::boolean, g.b = r.bools->data(), g.v = r.valid->data();
         break;
-      case Kind::string:
-        r.str->codes.resize(t.rows);
-        g.action = Action::string, g.codes = r.str->codes.data(), g.str = r.str;
+      case CsvKind::string:
+        r.strings->codes.resize(t.rows);
+        g.action = Action::string, g.codes = r.strings->codes.data(), g.str = r.strings;
         g.dict = dicts++;
         break;
     }

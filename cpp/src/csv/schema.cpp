@@ -1,7 +1,7 @@
-// The data.csv schema: column names in the writer's order, their kinds and shapes, and
-// where each lives in a PoseTable.
+// The data.csv schema: column names in the writer's order, their kinds and shapes.
 #include <cstdio>
 
+#include "bsp/csv/columns.hpp"
 #include "bsp/csv/csv.hpp"
 #include "csv_internal.hpp"
 
@@ -34,19 +34,17 @@ const std::array<const char*, kPoseCsvColumnCount> kPoseCsvColumns = {
     "frame.pedestrian.pose.in_segmentation",
 };
 
-namespace csv_detail {
-
 namespace {
-constexpr ColumnSpec str(const char* n) { return {n, Kind::string, 0, 0}; }
-constexpr ColumnSpec integer(const char* n) { return {n, Kind::integer, 0, 0}; }
-constexpr ColumnSpec list(const char* n, std::uint16_t k) { return {n, Kind::floats, 0, k}; }
-constexpr ColumnSpec nested(const char* n, std::uint16_t o, std::uint16_t i) {
-  return {n, Kind::floats, o, i};
+constexpr CsvColumnSpec str(const char* n) { return {n, CsvKind::string, 0, 0}; }
+constexpr CsvColumnSpec integer(const char* n) { return {n, CsvKind::integer, 0, 0}; }
+constexpr CsvColumnSpec list(const char* n, std::uint16_t k) { return {n, CsvKind::floats, 0, k}; }
+constexpr CsvColumnSpec nested(const char* n, std::uint16_t o, std::uint16_t i) {
+  return {n, CsvKind::floats, o, i};
 }
-constexpr ColumnSpec boolean(const char* n) { return {n, Kind::boolean, 0, 0}; }
+constexpr CsvColumnSpec boolean(const char* n) { return {n, CsvKind::boolean, 0, 0}; }
 }  // namespace
 
-const ColumnSpec kSpecs[kPoseCsvColumnCount] = {
+const CsvColumnSpec kPoseCsvSpecs[kPoseCsvColumnCount] = {
     str("id"),
     str("world.map"),
     integer("camera.idx"),
@@ -73,43 +71,19 @@ const ColumnSpec kSpecs[kPoseCsvColumnCount] = {
     boolean("frame.pedestrian.pose.in_segmentation"),
 };
 
-int column_index(std::string_view name) {
-  if (name == kCrossingAlias) return kCrossingColumn;
+int pose_csv_column_index(std::string_view name) {
+  if (name == kCrossingAlias) return csv_detail::kCrossingColumn;
   for (std::size_t c = 0; c < kPoseCsvColumnCount; ++c)
     if (name == kPoseCsvColumns[c]) return static_cast<int>(c);
   return -1;
 }
 
-ColumnRef column_ref(PoseTable& t, int col) {
-  ColumnRef r;
-  switch (col) {
-    case 0: r.str = &t.id; break;
-    case 1: r.str = &t.map; break;
-    case 2: r.ints = &t.camera_idx; break;
-    case 3: r.floats = &t.camera_transform; break;
-    case 4: r.ints = &t.camera_width; break;
-    case 5: r.ints = &t.camera_height; break;
-    case 6: r.ints = &t.pedestrian_idx; break;
-    case 7: r.str = &t.model; break;
-    case 8: r.str = &t.age; break;
-    case 9: r.str = &t.gender; break;
-    case 10: r.floats = &t.spawn_point; break;
-    case 11: r.ints = &t.frame_idx; break;
-    case 12: r.str = &t.recording; break;
-    case 13: r.str = &t.segmentation; break;
-    case 14: r.ints = &t.world_frame; break;
-    case 15: r.floats = &t.walker_transform; break;
-    case 16: r.floats = &t.velocity; break;
-    case 17: r.floats = &t.pose_world; break;
-    case 18: r.floats = &t.pose_component; break;
-    case 19: r.floats = &t.pose_relative; break;
-    case 20: r.bools = &t.is_crossing, r.valid = &t.is_crossing_valid; break;
-    case 21: r.floats = &t.pose_camera; break;
-    case 22: r.bools = &t.in_frame, r.valid = &t.in_frame_valid; break;
-    case 23: r.bools = &t.in_segmentation, r.valid = &t.in_segmentation_valid; break;
-    default: break;
-  }
-  return r;
+namespace csv_detail {
+
+std::string allowed_columns() {
+  std::string allowed;
+  for (const char* n : kPoseCsvColumns) allowed += std::string(allowed.empty() ? "" : ", ") + n;
+  return allowed + ", " + kCrossingAlias;
 }
 
 std::string snippet(std::string_view text, std::size_t max_chars) {

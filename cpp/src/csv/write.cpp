@@ -80,8 +80,8 @@ std::string csv_quote(const std::string& s) {
 // Column sizes must match t.rows; string codes must index their dictionary.
 void validate(PoseTable& t) {
   for (std::size_t c = 0; c < kPoseCsvColumnCount; ++c) {
-    const ColumnSpec& s = kSpecs[c];
-    const ColumnRef r = column_ref(t, static_cast<int>(c));
+    const CsvColumnSpec& s = kPoseCsvSpecs[c];
+    const PoseColumn r = pose_column(t, c);
     const auto bad = [&](std::size_t have, std::size_t want, const char* what) {
       throw std::invalid_argument("write_pose_csv: column '" + std::string(s.name) + "' has " +
                                   std::to_string(have) + " " + what + ", expected " +
@@ -94,30 +94,30 @@ void validate(PoseTable& t) {
     if (r.bools && r.bools->size() != t.rows) bad(r.bools->size(), t.rows, "values");
     if (r.valid && !r.valid->empty() && r.valid->size() != t.rows)
       bad(r.valid->size(), t.rows, "validity flags");
-    if (!r.str) continue;
-    if (r.str->codes.size() != t.rows) bad(r.str->codes.size(), t.rows, "codes");
-    for (std::int32_t code : r.str->codes)
-      if (code < 0 || static_cast<std::size_t>(code) >= r.str->values.size())
+    if (!r.strings) continue;
+    if (r.strings->codes.size() != t.rows) bad(r.strings->codes.size(), t.rows, "codes");
+    for (std::int32_t code : r.strings->codes)
+      if (code < 0 || static_cast<std::size_t>(code) >= r.strings->values.size())
         throw std::invalid_argument("write_pose_csv: column '" + std::string(s.name) +
                                     "' has code " + std::to_string(code) + " outside its " +
-                                    std::to_string(r.str->values.size()) + " values");
+                                    std::to_string(r.strings->values.size()) + " values");
   }
 }
 
 // Everything one row needs, resolved once per file.
 struct RowFormat {
-  ColumnRef refs[kPoseCsvColumnCount];
+  PoseColumn refs[kPoseCsvColumnCount];
   std::vector<std::vector<std::string>> quoted;  // per column: its dictionary, CSV-quoted
   std::size_t bound = 0;                          // bytes one row can take at most
 
   explicit RowFormat(PoseTable& t) : quoted(kPoseCsvColumnCount) {
     bound = 1;  // '\n'
     for (std::size_t c = 0; c < kPoseCsvColumnCount; ++c) {
-      refs[c] = column_ref(t, static_cast<int>(c));
-      const ColumnSpec& s = kSpecs[c];
+      refs[c] = pose_column(t, c);
+      const CsvColumnSpec& s = kPoseCsvSpecs[c];
       std::size_t longest = 0;
-      if (refs[c].str)
-        for (const std::string& v : refs[c].str->values) {
+      if (refs[c].strings)
+        for (const std::string& v : refs[c].strings->values) {
           quoted[c].push_back(csv_quote(v));
           longest = std::max(longest, quoted[c].back().size());
         }
@@ -137,7 +137,7 @@ char* format_floats(const float* v, std::size_t n, char* o) {
   return o;
 }
 
-char* format_list_cell(const ColumnSpec& s, const float* v, char* o) {
+char* format_list_cell(const CsvColumnSpec& s, const float* v, char* o) {
   *o++ = '"';  // every list here has a comma, so pandas quotes it
   if (!s.outer) {
     o = format_floats(v, s.inner, o);
@@ -156,17 +156,17 @@ char* format_list_cell(const ColumnSpec& s, const float* v, char* o) {
 char* format_row(const RowFormat& f, std::size_t row, char* o) {
   for (std::size_t c = 0; c < kPoseCsvColumnCount; ++c) {
     if (c) *o++ = ',';
-    const ColumnSpec& s = kSpecs[c];
-    const ColumnRef& r = f.refs[c];
+    const CsvColumnSpec& s = kPoseCsvSpecs[c];
+    const PoseColumn& r = f.refs[c];
     switch (s.kind) {
-      case Kind::string: {
-        const std::string& v = f.quoted[c][static_cast<std::size_t>(r.str->codes[row])];
+      case CsvKind::string: {
+        const std::string& v = f.quoted[c][static_cast<std::size_t>(r.strings->codes[row])];
         o = std::copy(v.begin(), v.end(), o);
         break;
       }
-      case Kind::integer: o = std::to_chars(o, o + 24, (*r.ints)[row]).ptr; break;
-      case Kind::floats: o = format_list_cell(s, r.floats->data() + row * s.numbers(), o); break;
-      case Kind::boolean:
+      case CsvKind::integer: o = std::to_chars(o, o + 24, (*r.ints)[row]).ptr; break;
+      case CsvKind::floats: o = format_list_cell(s, r.floats->data() + row * s.numbers(), o); break;
+      case CsvKind::boolean:
         if (r.valid->empty() || (*r.valid)[row]) {
           const bool b = (*r.bools)[row] != 0;
           o = std::copy_n(b ? "True" : "False", b ? 4 : 5, o);
@@ -224,7 +224,7 @@ class AtomicFile {
 }  // namespace
 
 void write_pose_csv(const std::string& path, const PoseTable& table, int threads) {
-  // The writer only reads the table; column_ref hands out mutable pointers for the reader.
+  // The writer only reads the table; pose_column hands out mutable pointers for the reader.
   PoseTable& t = const_cast<PoseTable&>(table);
   validate(t);
   const RowFormat format(t);

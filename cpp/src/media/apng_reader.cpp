@@ -14,8 +14,8 @@
 #include <mutex>
 #include <numeric>
 
-#include "bsp/media/apng.hpp"
 #include "bsp/common/errors.hpp"
+#include "bsp/media/apng.hpp"
 #include "png.hpp"
 
 namespace bsp {

@@ -11,8 +11,8 @@
 #include <tuple>
 #include <utility>
 
-#include "bsp/media/apng.hpp"
 #include "bsp/common/errors.hpp"
+#include "bsp/media/apng.hpp"
 #include "png.hpp"
 
 namespace bsp {

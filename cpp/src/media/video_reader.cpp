@@ -11,8 +11,8 @@
 #include <thread>
 
 #include "bsp/common/errors.hpp"
-#include "ffmpeg.hpp"
 #include "bsp/media/video.hpp"
+#include "ffmpeg.hpp"
 
 extern "C" {
 #include <libavutil/pixdesc.h>

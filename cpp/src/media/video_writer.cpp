@@ -6,8 +6,8 @@
 #include <cstdio>
 
 #include "bsp/common/errors.hpp"
-#include "ffmpeg.hpp"
 #include "bsp/media/video.hpp"
+#include "ffmpeg.hpp"
 
 extern "C" {
 #include <libavutil/opt.h>

@@ -8,6 +8,7 @@
 
 #include "bsp/common/parallel.hpp"
 #include "bsp/synth/render.hpp"
+#include "render_internal.hpp"
 
 namespace bsp::render {
 namespace {

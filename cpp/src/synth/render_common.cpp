@@ -4,6 +4,7 @@
 #include <cstdint>
 
 #include "bsp/synth/render.hpp"
+#include "render_internal.hpp"
 
 namespace bsp::render {
 

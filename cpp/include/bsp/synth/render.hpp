@@ -111,13 +111,4 @@ void render_bodies(const Camera& cam, const Lighting& light, const std::uint8_t*
                    std::size_t caps_per_frame, std::size_t frames, std::uint8_t* rgb,
                    std::uint8_t* tags, std::uint8_t* visible, int threads = 0);
 
-// ---- helpers shared by the two passes (exposed for the unit tests) -------------------
-// Nearest hit t > 0 of origin + t * dir with the capsule, or -1. `dir` must be unit length.
-double intersect_capsule(const Vec3& origin, const Vec3& dir, const Vec3& a, const Vec3& b,
-                         double radius);
-// Smooth value noise in [-1, 1] (deterministic hash of the lattice).
-double value_noise(const Vec3& p);
-// Lambert shading of a base colour (0..255) with a unit normal, world or road frame alike.
-Vec3 shade(const Vec3& rgb, const Vec3& normal, const Vec3& sun_dir, const Lighting& light);
-
 }  // namespace bsp::render

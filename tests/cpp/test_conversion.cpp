@@ -6,8 +6,8 @@
 #include <cmath>
 #include <vector>
 
-#include "bsp/conversion/convert.hpp"
 #include "bsp/common/errors.hpp"
+#include "bsp/conversion/convert.hpp"
 
 using namespace bsp;
 
@@ -54,7 +54,7 @@ TEST_CASE("frame_media: mask bbox, pixel count and per-joint visibility by hand"
   CHECK(m.crop_box == std::array<float, 4>{-11, -7, 21, 25});
 }
 
-TEST_CASE("frame_media: 20 % margin around a large mask; no mask means nothing visible") {
+TEST_CASE("frame_media: 20 % margin around a large mask, and no mask means nothing visible") {
   const auto tags = frame(200, 100, 50, 10, 90, 80);  // 40 x 70
   const auto uv = joints_at(60, 40);
   const FrameMedia m = frame_media(tags.data(), 200, 100, uv.data());

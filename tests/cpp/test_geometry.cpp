@@ -9,9 +9,9 @@
 
 #include <Eigen/Dense>
 
+#include "bsp/common/parallel.hpp"
 #include "bsp/geometry/camera.hpp"
 #include "bsp/geometry/kinematics.hpp"
-#include "bsp/common/parallel.hpp"
 #include "bsp/geometry/skeleton.hpp"
 
 using namespace bsp;
