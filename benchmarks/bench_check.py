@@ -11,8 +11,9 @@ file per thread at a time, discarding the pixels.
 
 Without --dataset, a full-size bsp-synth dataset (1600x600, `video_preset: ultrafast`, as
 the MP4s' encoding does not matter here) is generated once under --dir. Runs alternate
-(baseline, check) --repeats times; the fastest of each counts; the load average is printed
-before and after because the machine is shared.
+(baseline, check) --repeats times; the fastest of each counts, the ratio of each adjacent
+pair and the process CPU seconds are printed too, and the load average before and after,
+because the machine is shared.
 """
 from __future__ import annotations
 
@@ -55,10 +56,10 @@ def decode_all(path: str) -> int:
 
 
 def baseline(files: list, threads: int) -> tuple:
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     with cf.ThreadPoolExecutor(max_workers=threads) as pool:
         frames = sum(pool.map(decode_all, files))
-    return time.perf_counter() - t0, frames
+    return time.perf_counter() - t0, time.process_time() - c0, frames
 
 
 def main() -> int:
@@ -80,29 +81,36 @@ def main() -> int:
     size_mb = sum(os.path.getsize(f) for f in files) / 1e6
     csv_mb = os.path.getsize(root / "data.csv") / 1e6
     load0 = os.getloadavg()
-    base, chk, stage = [], [], []
+    base, chk, stage, bcpu, ccpu = [], [], [], [], []
     for _ in range(args.repeats):
-        t, frames = baseline(files, args.threads)
+        t, cpu, frames = baseline(files, args.threads)
         base.append(t)
-        t0 = time.perf_counter()
+        bcpu.append(cpu)
+        t0, c0 = time.perf_counter(), time.process_time()
         rep = check_dataset(root, threads=args.threads)
         chk.append(time.perf_counter() - t0)
+        ccpu.append(time.process_time() - c0)
         stage.append(rep["seconds"].get("media", float("nan")))
     load1 = os.getloadavg()
     b, c, m = min(base), min(chk), min(stage)
+    paired = sorted(x / y for x, y in zip(chk, base))
     print(f"dataset: {root}: {len(files)} APNGs ({size_mb:.1f} MB, {frames} frames), "
           f"data.csv {rep['rows']} rows ({csv_mb:.0f} MB), {len(rep['recordings'])} "
           f"recordings; threads {args.threads}; repeats {args.repeats} (fastest counts)")
     print(f"load average before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, after "
           f"{load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}; findings: {len(rep['findings'])}")
     print()
-    print("| run | seconds | frames/s | vs decoding alone |")
-    print("|---|---:|---:|---:|")
-    print(f"| decode every APNG frame (baseline) | {b:.2f} | {frames / b:,.0f} | 1.00x |")
-    print(f"| bsp-check, media stage | {m:.2f} | {frames / m:,.0f} | {m / b:.2f}x |")
+    print("| run | wall s | frames/s | vs decoding alone | CPU s |")
+    print("|---|---:|---:|---:|---:|")
+    print(f"| decode every APNG frame (baseline) | {b:.2f} | {frames / b:,.0f} | 1.00x | "
+          f"{min(bcpu):.2f} |")
+    print(f"| bsp-check, media stage | {m:.2f} | {frames / m:,.0f} | {m / b:.2f}x | |")
     print(f"| bsp-check, whole run (CSV, MP4 scans, masks, statistics) | {c:.2f} | "
-          f"{frames / c:,.0f} | {c / b:.2f}x |")
-    print(f"\nall runs (s): baseline {', '.join(f'{x:.2f}' for x in base)}; check "
+          f"{frames / c:,.0f} | {c / b:.2f}x | {min(ccpu):.2f} |")
+    print(f"\nwhole run / baseline, run by run (adjacent runs, sorted): "
+          f"{', '.join(f'{x:.2f}' for x in paired)}; median {paired[len(paired) // 2]:.2f}; "
+          f"CPU {min(ccpu) / min(bcpu):.2f}x")
+    print(f"all runs (s): baseline {', '.join(f'{x:.2f}' for x in base)}; check "
           f"{', '.join(f'{x:.2f}' for x in chk)}")
     return 0
 

@@ -65,9 +65,15 @@ def format_statistics(stats: dict) -> list:
     return out
 
 
+def _shown(path: str) -> str:
+    """A path relative to the working directory when it lies below it."""
+    rel = os.path.relpath(path)
+    return path if rel.startswith("..") else rel
+
+
 def format_report(report: dict, max_items: int = 20) -> str:
     """Human-readable summary: findings, notes, statistics and the verdict."""
-    out = [f"bsp-check {report['dataset']}"]
+    out = [f"bsp-check {_shown(report['dataset'])}"]
     if "rows" in report:
         n_media = report.get("media_files")
         out.append(f"data.csv: {report['rows']} rows, {len(report['recordings'])} recordings"
@@ -92,11 +98,11 @@ def format_report(report: dict, max_items: int = 20) -> str:
         out += format_statistics(report["statistics"])
     fix = report.get("fix")
     if fix:
-        out.append(f"\nCleaned copy: {fix['out_dir']}")
+        out.append(f"\nCleaned copy: {_shown(fix['out_dir'])}")
         out.append(f"  kept {fix['recordings_kept']} recordings, {fix['rows_kept']} rows, "
                    f"{fix['files_copied']} files; dropped {fix['recordings_dropped']} "
                    f"recordings, {fix['rows_dropped']} rows, {fix['files_dropped']} files "
-                   f"(why: {fix['log']})")
+                   f"(why: {_shown(fix['log'])})")
     out.append("\nResult: " + ("clean" if report["clean"] else
                                f"{len(findings)} problem(s) found"))
     return "\n".join(out) + "\n"

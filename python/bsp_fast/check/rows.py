@@ -45,7 +45,7 @@ class Recording:
     video_frames: int | None = None
     segmentation_frames: int | None = None
     mask_any: np.ndarray | None = None    # (rows,) tag-4 pixel anywhere in the frame
-    mask_near: np.ndarray | None = None   # (rows,) tag-4 pixels around the joints
+    mask_near: np.ndarray | None = None   # (rows,) a tag-4 pixel near the joints
     scanned: np.ndarray | None = None     # (rows,) the row's mask frame was decoded
     # Row findings of the media scan: rows (table row numbers) whose in_segmentation
     # disagrees with the mask, rows with no tag-4 pixel around their joints.

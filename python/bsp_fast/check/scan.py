@@ -2,10 +2,11 @@
 
 A job opens the videos of its recordings (the reader counts frames by scanning packets,
 without decoding), then decodes the segmentation APNG once, forward, copying out only the
-frames that rows are annotated on, and measures each such row's mask: tag-4 (pedestrian)
-pixels inside a window around the row's projected joints, and, only where that window
-holds none, whether the frame holds any at all. The C++ readers release the GIL while they
-read, so jobs on several threads use several cores.
+frames that rows are annotated on, and measures each such row's mask: is there a tag-4
+(pedestrian) pixel near the row's projected joints (first the joints' own pixels, gathered
+for a whole batch in one NumPy call; for the rows none of them hits, a window around the
+joints), and, only where there is none, anywhere in the frame. The C++ readers release the
+GIL while they read, so jobs on several threads use several cores.
 """
 from __future__ import annotations
 
@@ -63,7 +64,8 @@ def scan_job(root: str, seg: str, entries: list, fps: float) -> dict:
 
     ``entries``: [(key, video path, rows' frame.idx, rows' (n, 26, 2) joints, width,
     height)], all relative paths. Returns {"videos": {path: info}, "segmentation": info,
-    "rows": {key: (mask_any, mask_near, scanned)}}; every error is caught and returned.
+    "rows": {key: (mask_any, mask_near, scanned)}} (three bool arrays per recording);
+    every error is caught and returned.
     """
     out: dict = {"videos": {}, "segmentation": None, "rows": {}}
     for _, video, *_ in entries:
@@ -83,7 +85,7 @@ def scan_job(root: str, seg: str, entries: list, fps: float) -> dict:
     mapping = reader.video_to_apng_frames(last + 1, fps) if last >= 0 else np.empty(0, np.int64)
     info["covers"] = int(np.count_nonzero(mapping >= 0))
     # Every row of every recording of this file, as (apng frame, window).
-    keys, wins, apng = [], [], []
+    keys, wins, apng, joints = [], [], [], []
     W, H = reader.size
     for key, _, frames, uv, *_ in entries:
         f = np.asarray(frames, np.int64)
@@ -93,44 +95,70 @@ def scan_job(root: str, seg: str, entries: list, fps: float) -> dict:
         keys.append(key)
         apng.append(idx)
         wins.append(joint_windows(uv, W, H))
-        out["rows"][key] = (np.zeros(len(f), bool), np.zeros(len(f), np.int64),
-                            np.zeros(len(f), bool))
+        joints.append(_joint_pixels(np.asarray(uv, np.float64), W, H))
     try:
-        _measure(reader, keys, apng, wins, out["rows"])
+        _measure(reader, keys, apng, wins, joints, out["rows"])
     except Exception as e:  # noqa: BLE001 - a damaged frame: rows before it are measured
         info["error"] = f"{type(e).__name__}: {e}"
     return out
 
 
-def _measure(reader: ApngReader, keys, apng, wins, results) -> None:
-    flat_idx = np.concatenate(apng) if apng else np.empty(0, np.int64)
-    owner = np.concatenate([np.full(len(a), i) for i, a in enumerate(apng)]) if apng else flat_idx
-    local = np.concatenate([np.arange(len(a)) for a in apng]) if apng else flat_idx
-    flat_win = np.concatenate(wins) if wins else np.empty((0, 4), np.int64)
-    keep = flat_idx >= 0
-    order = np.flatnonzero(keep)[np.argsort(flat_idx[keep], kind="stable")]
+def _joint_pixels(uv: np.ndarray, width: int, height: int) -> tuple:
+    """(x, y, ok) int64 pixel of each joint and whether it lies in the image."""
+    with np.errstate(invalid="ignore"):
+        x, y = np.floor(uv[..., 0]), np.floor(uv[..., 1])
+        ok = np.isfinite(x) & np.isfinite(y) & (x >= 0) & (y >= 0) & (x < width) & (y < height)
+    return (np.where(ok, x, 0).astype(np.int64), np.where(ok, y, 0).astype(np.int64), ok)
+
+
+def _measure(reader: ApngReader, keys, apng, wins, joints, results) -> None:
+    """Fills results[key] = (any pedestrian pixel in the frame, one near the joints,
+    measured) per row. Most rows are settled by the joints' own pixels, gathered for a
+    whole batch at once; only the others have their window scanned."""
+    n = sum(len(a) for a in apng)
+    flat_idx = np.concatenate(apng) if n else np.empty(0, np.int64)
+    flat_win = np.concatenate(wins) if n else np.empty((0, 4), np.int64)
+    jx, jy, jok = (np.concatenate([j[i] for j in joints]) if n else np.empty((0, 26), np.int64)
+                   for i in range(3))
+    near = np.zeros(n, bool)
+    any_ = np.zeros(n, bool)
+    scanned = np.zeros(n, bool)
+    order = np.flatnonzero(flat_idx >= 0)
+    order = order[np.argsort(flat_idx[order], kind="stable")]
     frames_needed = np.unique(flat_idx[order])
+    sorted_idx = flat_idx[order]
     W, H = reader.size
     step = max(1, BATCH_BYTES // max(1, W * H * max(1, reader.channels)))
-    pos = 0
-    for b in range(0, len(frames_needed), step):
-        want = frames_needed[b:b + step]
-        batch = reader.read(want)
-        if batch.ndim != 3:  # not a palette/grey file: no tags to look at
-            raise ValueError("segmentation is not an 8-bit palette (class tag) image")
-        top = want[-1]
-        while pos < len(order) and flat_idx[order[pos]] <= top:
-            i = order[pos]
-            frame = batch[np.searchsorted(want, flat_idx[i])]
-            u0, v0, u1, v1 = flat_win[i]
-            near = int(np.count_nonzero(frame[v0:v1, u0:u1] == PEDESTRIAN_TAG)) \
-                if u1 > u0 and v1 > v0 else 0
-            any_, near_, scanned = results[keys[owner[i]]]
-            k = local[i]
-            near_[k] = near
-            any_[k] = near > 0 or _has_tag(frame)
-            scanned[k] = True
-            pos += 1
+    tag, frame = PEDESTRIAN_TAG, None
+    try:
+        for b in range(0, len(frames_needed), step):
+            want = frames_needed[b:b + step]
+            batch = reader.read(want)
+            if batch.ndim != 3:  # not a palette/grey file: no tags to look at
+                raise ValueError("segmentation is not an 8-bit palette (class tag) image")
+            rows = order[np.searchsorted(sorted_idx, want[0], side="left"):
+                         np.searchsorted(sorted_idx, want[-1], side="right")]
+            at = np.searchsorted(want, flat_idx[rows])
+            hit = ((batch[at[:, None], jy[rows], jx[rows]] == tag) & jok[rows]).any(1)
+            near[rows[hit]] = any_[rows[hit]] = True
+            miss = ~hit
+            for i, k, (u0, v0, u1, v1) in zip(rows[miss].tolist(), at[miss].tolist(),
+                                               flat_win[rows[miss]].tolist()):
+                frame = batch[k]
+                c = u1 > u0 and v1 > v0 and bool((frame[v0:v1, u0:u1] == tag).any())
+                near[i] = c
+                any_[i] = c or _has_tag(frame, tag)
+            scanned[rows] = True
+            # Free this batch before reading the next, so its memory is reused instead of
+            # a fresh allocation being page-faulted in.
+            del batch
+            frame = None
+    finally:
+        start = 0
+        for key, a in zip(keys, apng):
+            stop = start + len(a)
+            results[key] = (any_[start:stop], near[start:stop], scanned[start:stop])
+            start = stop
 
 
 def scan_entries(table, recs: list) -> dict:
