@@ -188,6 +188,8 @@ def test_poses_only_dataset_is_not_missing_its_media(pristine, tmp_path):
     assert rep["poses_only"] and rep["clean"], rep["findings"]
     assert any("poses-only" in x for x in rep["info"])
     assert rep["statistics"]["total"]["frames"] == len(bf.read_csv(ds / "data.csv", ["id"]))
+    # Frame totals come from config.yaml's clip length when no video is read.
+    assert rep["statistics"]["video_frames"] == 5 * 90
     # The same directory without the flag misses every file.
     (ds / "config.yaml").write_text(cfg)
     assert {f["kind"] for f in check_dataset(ds)["findings"]} == {"missing_file"}

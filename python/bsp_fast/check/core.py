@@ -113,7 +113,8 @@ def run_check(dataset, *, threads=None, progress=False) -> tuple:
         _check_media(root, table, recs, fps, threads, progress, report)
         report["seconds"]["media"] = time.perf_counter() - t1
     _row_findings(table, recs, report)
-    report["statistics"] = statistics(table, recs)
+    n = config.get("clip_length_in_frames")
+    report["statistics"] = statistics(table, recs, n if isinstance(n, int) and n > 0 else None)
     report["recordings"] = [_recording_entry(table, r) for r in recs]
     return _finish(report, t0), recs, table
 

@@ -157,11 +157,12 @@ def event_camera_file(path: str, ids: set) -> bool:
     return stem.endswith("-2") and stem[:-2] in ids
 
 
-def statistics(table, recs: list, dropped_rows: np.ndarray | None = None) -> dict:
+def statistics(table, recs: list, clip_frames: int | None = None) -> dict:
     """Scenes, annotated and crossing frames per (age, gender), and the annotated share.
 
     Duplicate rows count once. A recording's frame total is its video's frame count when
-    the video was read, else (poses only, missing video) its last frame.idx + 1.
+    the video was read, else (poses only, missing video) ``clip_frames`` (config.yaml's
+    clip_length_in_frames) when given, else its last frame.idx + 1.
     """
     crossing = table[CROSSING]
     per: dict = {}
@@ -176,6 +177,9 @@ def statistics(table, recs: list, dropped_rows: np.ndarray | None = None) -> dic
         if r.video_frames is not None:
             total_frames += r.video_frames
             basis.add("video frame counts")
+        elif clip_frames:
+            total_frames += int(clip_frames)
+            basis.add("config.yaml clip_length_in_frames")
         elif len(r.frames):
             total_frames += int(r.frames.max()) + 1
             basis.add("last frame.idx + 1")
