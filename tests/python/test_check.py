@@ -217,3 +217,47 @@ def test_joint_windows_by_hand():
     assert w[0].tolist() == [90, 40, 151, 81]
     assert w[1].tolist() == [0, 0, 14, 12]  # floor(5.5 + 8) + 1, floor(3.2 + 8) + 1
     assert w[2].tolist() == [0, 0, 0, 0]    # nothing finite: empty window
+
+
+def test_frames_past_the_media_and_a_false_in_segmentation(pristine, tmp_path):
+    import re
+
+    ds = tmp_path / "ds"
+    shutil.copytree(pristine, ds)
+    t, recs = _recordings(ds)
+    ids = sorted(recs, key=lambda r: -len(recs[r]["rows"]))  # the longest recordings first
+    lines = (ds / "data.csv").read_bytes().split(b"\n")
+    flip = int(t.lines[recs[ids[0]]["rows"][5]])
+    assert lines[flip - 1].endswith(b",True")
+    lines[flip - 1] = lines[flip - 1][: -len(b"True")] + b"False"     # mask shows it
+    late = lines[int(t.lines[recs[ids[1]]["rows"][-1]]) - 1]
+    late = re.sub(rb'(\]",)(\d+)(,clips/)', rb"\g<1>95\g<3>", late, count=1)
+    assert b'",95,clips/' in late
+    lines.insert(len(lines) - 1, late)                               # frame 95 of 90
+    (ds / "data.csv").write_bytes(b"\n".join(lines))
+    rep = check_dataset(ds)
+    by = {(f["kind"], f["recording"].split(" ")[0]): f for f in rep["findings"]}
+    assert set(by) == {("in_segmentation_mismatch", ids[0]), ("too_few_video_frames", ids[1]),
+                       ("too_short_segmentation", ids[1])}
+    assert by[("in_segmentation_mismatch", ids[0])]["lines"] == [flip]
+    assert "says False" in by[("in_segmentation_mismatch", ids[0])]["message"]
+    assert "has 90 frames, data.csv annotates frame 95" in \
+        by[("too_few_video_frames", ids[1])]["message"]
+    # --fix drops the recording that runs past its media and keeps the flipped row as is.
+    fix_dataset(ds, tmp_path / "out")
+    kept = (tmp_path / "out" / "data.csv").read_bytes()
+    assert lines[flip - 1] + b"\n" in kept and ids[1].encode() not in kept
+
+
+def test_segmentation_with_dropped_duplicate_frames(tmp_path):
+    """An APNG that stores identical consecutive frames once: rows find their mask frame
+    by the frame delays, so the check stays clean."""
+    from bsp_fast.synth import generate
+
+    generate(tmp_path / "dd", "sample", clips=2, frames=60, size="160x96", seed=21,
+             workers=1, progress=False, apng_drop_duplicates=True)
+    rep = check_dataset(tmp_path / "dd")
+    assert rep["clean"], rep["findings"]
+    r = rep["recordings"][0]
+    assert r["segmentation_frames"] < r["video_frames"] == 60
+    assert r["rows_with_pedestrian_pixels"] == r["rows"] - r["fully_occluded_rows"]
