@@ -1,0 +1,301 @@
+"""bsp-train / bsp-eval / bsp-predict end to end on tiny generated files: every task trains
+2 epochs, bsp-eval reproduces metrics.json, --resume continues, --table, predictions,
+seeds, a 2-process DDP run, and bad input."""
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+import bsp_fast
+from bsp_fast.data.testing import write_clip_file
+from bsp_fast.training.curves import read_logs
+from bsp_fast.training.evaluate import main as eval_main
+from bsp_fast.training.train import main as train_main
+
+pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
+              pytest.mark.filterwarnings("ignore::UserWarning")]
+
+# tiny versions of a model of each task (seconds per run on one core)
+TINY = {"classification": ("lstm", {"hidden_size": 8, "num_layers": 1}),
+        "autoencoder": ("simple_transformer", {"num_layers": 1, "dim_feedforward": 16}),
+        "lifting": ("baseline_3d", {"linear_size": 32, "num_blocks": 1}),
+        "pose_estimation": ("pose_cnn", {"width": 4, "hidden": 16})}
+KEYS = {"classification": {"loss", "f1", "precision", "recall", "accuracy"},
+        "autoencoder": {"loss", "pck_0.05", "pckhn_0.1", "mjr"},
+        "lifting": {"loss", "mpjpe_mm", "n_mpjpe_mm", "pa_mpjpe_mm", "mpjve_mm"},
+        "pose_estimation": {"loss", "pck_0.05", "pckhn_0.1"}}
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp("training")
+    info = write_clip_file(root / "clips.h5", clips=(48, 16, 16), clip_length=8, seed=3)
+    write_clip_file(root / "media.h5", clips=(24, 8, 8), clip_length=4, media=True,
+                    crop_size=16, seed=4)
+    return {"root": root, "clips": info["clips"]}
+
+
+def _h5(data, task):
+    return data["root"] / ("media.h5" if task == "pose_estimation" else "clips.h5")
+
+
+def _train(data, task, out, **options):
+    model, hp = TINY[task]
+    options = {"epochs": 2, "batch_size": 8, "hp": hp, "quiet": True, **options}
+    return bsp_fast.train(task, model, data=_h5(data, task), out=out, **options)
+
+
+@pytest.fixture(scope="module")
+def runs(data):
+    return {task: _train(data, task, data["root"] / "runs" / task) for task in TINY}
+
+
+@pytest.mark.parametrize("task", list(TINY))
+def test_train_writes_a_complete_run(runs, task):
+    res = runs[task]
+    run = res.run_dir
+    assert sorted(p.name for p in run.iterdir()) == ["checkpoints", "config.yaml", "curves.png",
+                                                    "logs", "metrics.json"]
+    assert not [p for p in run.parent.iterdir() if p.name.startswith(".")]  # no temporaries
+    saved = json.loads((run / "metrics.json").read_text())
+    assert set(saved["test"]) == KEYS[task] and saved["test"] == res.metrics
+    assert all(math.isfinite(v) for v in saved["test"].values())
+    assert set(saved["initial"]["val"]) == set(saved["initial"]["test"]) == KEYS[task]
+    assert saved["epochs"] == 2 and saved["best_epoch"] in (1, 2)
+    assert (run / "checkpoints" / "best.ckpt").is_file()
+    assert (run / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    logs = read_logs(run)
+    assert sorted(logs["val/loss"]) == [0, 1] and sorted(logs["train/loss"]) == [0, 1]
+    assert saved["val"]["loss"] == pytest.approx(min(logs["val/loss"].values()))
+    # the resolved config is a valid --config file
+    from bsp_fast.training.config import read_yaml
+
+    cfg = read_yaml(run / "config.yaml")
+    assert (cfg["task"], cfg["model"], cfg["epochs"], cfg["force"]) == (task, TINY[task][0], 2,
+                                                                       False)
+
+
+def test_initial_metrics_are_the_trivial_baselines(runs, data):
+    initial = json.loads((runs["classification"].run_dir / "metrics.json").read_text())["initial"]
+    assert initial["baseline"] == "majority class"
+    with h5py.File(_h5(data, "classification")) as f:
+        train, test = f["train/labels"][()], f["test/labels"][()]
+    majority = int(np.bincount(train, minlength=2).argmax())
+    assert initial["test"]["accuracy"] == pytest.approx(np.mean(test == majority))
+    # identity on clean inputs: every joint within any threshold
+    ae = json.loads((runs["autoencoder"].run_dir / "metrics.json").read_text())["initial"]
+    assert ae["test"]["pck_0.05"] == 1.0 and ae["test"]["pckhn_0.1"] == 1.0
+
+
+@pytest.mark.parametrize("task", list(TINY))
+def test_eval_reproduces_metrics_json(runs, task):
+    saved = json.loads((runs[task].run_dir / "metrics.json").read_text())["test"]
+    res = bsp_fast.evaluate(runs[task].run_dir)
+    assert res.task == task and res.split == "test"
+    assert res.metrics == pytest.approx(saved, rel=1e-9)
+
+
+def test_eval_cli_and_table(runs, capsys, tmp_path):
+    run = runs["lifting"].run_dir
+    assert eval_main([str(run / "checkpoints" / "best.ckpt"), "--quiet",
+                      "--json", str(tmp_path / "m.json")]) == 0
+    out = json.loads((tmp_path / "m.json").read_text())
+    assert out["test"]["mpjpe_mm"] == pytest.approx(runs["lifting"].metrics["mpjpe_mm"])
+    capsys.readouterr()
+    assert eval_main(["--table"] + [str(r.run_dir) for r in runs.values()]) == 0
+    text = capsys.readouterr().out
+    for title, header in (
+            ("classification", "| model | σ (px) | MJP | F1 | precision | recall | accuracy |"),
+            ("autoencoder", "| model | σ (px) | MJP | MJR | PCK@0.05 (%) | PCKhn@0.1 (%) |"),
+            ("lifting", "| model | MPJPE (mm) | N-MPJPE (mm) | PA-MPJPE (mm) | MPJVE (mm) |"),
+            ("pose_estimation", "| model | PCK@0.05 (%) | PCKhn@0.1 (%) |")):
+        section = text.split(f"### {title} (test)")[1].split("###")[0]
+        squeezed = " ".join(section.split())
+        assert header in squeezed.replace("| epochs | run |", "|")
+        assert "initial: " in section and f"| {TINY[title][0]} " in squeezed
+    mm = f"{runs['lifting'].metrics['mpjpe_mm']:.2f}"
+    assert mm in text
+    assert eval_main(["--table", "--format", "csv", str(run)]) == 0
+    rows = capsys.readouterr().out.splitlines()
+    assert rows[0].startswith("task,model,MPJPE (mm),N-MPJPE (mm),PA-MPJPE (mm),MPJVE (mm)")
+    assert rows[1].startswith("lifting,initial: mean training pose,") and len(rows) == 3
+
+
+def test_resume_continues_from_the_last_checkpoint(runs, tmp_path):
+    run = tmp_path / "resumed"
+    shutil.copytree(runs["classification"].run_dir, run)
+    before = read_logs(run)["val/loss"]
+    res = bsp_fast.train(resume=run, epochs=3, quiet=True)  # in place
+    assert res.run_dir == run and res.epochs == 3
+    logs = read_logs(run)
+    assert sorted(logs["val/loss"]) == [0, 1, 2]
+    assert {e: logs["val/loss"][e] for e in (0, 1)} == before  # continued, not restarted
+    assert sorted(p.name for p in (run / "logs").iterdir()) == ["version_0", "version_1"]
+    ckpt = torch.load(run / "checkpoints" / "last.ckpt", weights_only=True)
+    assert ckpt["epoch"] == 2
+    saved = json.loads((run / "metrics.json").read_text())
+    assert saved["epochs"] == 3
+    assert saved["initial"] == json.loads(
+        (runs["classification"].run_dir / "metrics.json").read_text())["initial"]
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_same_seed_same_metrics(data, tmp_path):
+    # noise, missing joints, augmentation, dropout and batch order all come from the seed
+    opts = dict(noise=3.0, mjp=0.1, seed=5)
+    a = _train(data, "autoencoder", tmp_path / "a", **opts)
+    b = _train(data, "autoencoder", tmp_path / "b", **opts)
+    c = _train(data, "autoencoder", tmp_path / "c", **dict(opts, seed=6))
+    assert a.metrics == b.metrics  # bit-identical on CPU
+    assert read_logs(a.run_dir)["train/loss"] == read_logs(b.run_dir)["train/loss"]
+    assert a.metrics["loss"] != c.metrics["loss"]
+    assert 0.05 < a.metrics["mjr"] < 0.15  # realised missing-joint ratio of mjp 0.1
+
+
+def test_predict_writes_denormalised_outputs(runs, data, tmp_path):
+    from bsp_fast.training.predict import main as predict_main
+
+    out = tmp_path / "lifting.h5"
+    assert predict_main([str(runs["lifting"].run_dir), "--out", str(out), "--quiet"]) == 0
+    with h5py.File(out) as f, h5py.File(_h5(data, "lifting")) as src:
+        rows = f["row"][()]
+        assert sorted(rows.tolist()) == list(range(src["test/labels"].shape[0]))
+        np.testing.assert_array_equal(f["clip_id"][()], src["test/meta/clip_id"][()][rows])
+        target = src["test/targets/absolute_pose_loc"][()][rows]
+        np.testing.assert_allclose(f["target_metres"][()], target, atol=1e-6)
+        err = np.linalg.norm(f["metres_aligned"][()] - target, axis=-1).mean() * 1000
+        assert err == pytest.approx(runs["lifting"].metrics["mpjpe_mm"], rel=1e-4)
+        assert f.attrs["task"] == "lifting" and f.attrs["units"] == "metres"
+    out = tmp_path / "ae.h5"
+    assert predict_main([str(runs["autoencoder"].run_dir), "--out", str(out), "--quiet"]) == 0
+    assert predict_main([str(runs["autoencoder"].run_dir), "--out", str(out)]) == 3
+    with h5py.File(out) as f, h5py.File(_h5(data, "autoencoder")) as src:
+        clean = src["test/projection_2d"][()][f["row"][()]]
+        np.testing.assert_allclose(f["target_pixels"][()], clean, atol=2e-3)
+        assert f["pixels"].shape == clean.shape
+    out = tmp_path / "cls.h5"
+    assert predict_main([str(runs["classification"].run_dir), "--out", str(out), "--quiet"]) == 0
+    with h5py.File(out) as f:
+        acc = np.mean(f["prediction"][()] == f["label"][()])
+        assert acc == pytest.approx(runs["classification"].metrics["accuracy"])
+
+
+def test_lifting_scores_with_the_reference_skeleton(data):
+    """A perfect normalised prediction is scaled by the reference hips-neck length of the
+    clip's (age, gender) and put on the target's hips: the MPJPE is the hand-computed
+    error of that scale against each clip's true skeleton."""
+    from bsp_fast.data import ClipDataset
+    from bsp_fast.training.scoring import TaskMetrics
+
+    ds = ClipDataset(_h5(data, "lifting"), "test", "lifting")
+    batch = ds[list(range(len(ds)))]
+
+    class Whole:
+        def frame_slice(self, L):
+            return slice(0, L)
+
+    metrics = TaskMetrics("lifting")
+    metrics.update(batch["targets"], batch, Whole())
+    got = metrics.compute()["mpjpe_mm"]
+    ref = {}
+    for age, gender in set(zip(batch["meta"]["age"], batch["meta"]["gender"])):
+        comp = bsp_fast.forward_kinematics(bsp_fast.skeleton.reference_pose((age, gender)))
+        ref[age, gender] = np.linalg.norm(comp[8, :3] - comp[1, :3])
+    hn = np.array([ref[k] for k in zip(batch["meta"]["age"], batch["meta"]["gender"])])
+    t = batch["targets"].numpy().astype(np.float64)
+    m = batch["targets_m"].numpy().astype(np.float64)
+    pred = t * hn[:, None, None, None] + m[:, :, 1:2, :]
+    want = np.linalg.norm(pred - m, axis=-1).mean() * 1000
+    assert want > 1.0  # children's skeletons are shorter than the recorded female one
+    assert got == pytest.approx(want, rel=1e-5)
+
+
+def test_ddp_two_processes_match_one(data, tmp_path):
+    """One 2-process DDP run on CPU (gloo): its test metrics, reduced over both processes,
+    equal a single-process evaluation of the same checkpoint."""
+    assert data["clips"]["test"] % 2 == 0  # no clip repeated to even out the ranks
+    model, hp = TINY["lifting"]
+    out = tmp_path / "ddp"
+    cmd = [sys.executable, "-m", "bsp_fast", "train", "lifting", model, "--data",
+           str(_h5(data, "lifting")), "--out", str(out), "--epochs", "1", "--batch-size", "8",
+           "--accelerator", "cpu", "--devices", "2", "--strategy", "ddp", "--quiet"]
+    cmd += [a for k, v in hp.items() for a in ("--hp", f"{k}={v}")]
+    env = dict(os.environ, OMP_NUM_THREADS="1",
+               PYTHONPATH=os.pathsep.join([str(REPO / "python"), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    saved = json.loads((out / "metrics.json").read_text())
+    assert saved["world_size"] == 2
+    single = bsp_fast.evaluate(out)
+    assert single.metrics == pytest.approx(saved["test"], rel=1e-6)
+
+
+def _no_run(path: Path) -> bool:
+    return not path.exists() and not [p for p in path.parent.iterdir()
+                                      if p.name.startswith(f".{path.name}.")]
+
+
+def test_bad_input_fails_cleanly(runs, data, tmp_path, capsys):
+    out = tmp_path / "bad"
+    h5 = str(_h5(data, "lifting"))
+    cases = [
+        (["lifting", "baseline_3d", "--data", str(tmp_path / "nope.h5")], 1,
+         "no such dataset directory or HDF5 file"),
+        (["pose_estimation", "pose_cnn", "--data", h5], 1,
+         "lacks ['frames/rgb', 'frames/crop_box', 'frames/joint_visible', 'clip_frames']"),
+        (["lifting", "resnet", "--data", h5], 2,
+         "unknown model 'resnet' for task 'lifting'; allowed: baseline_3d"),
+        (["lifting", "baseline_3d", "--data", h5, "--hp", "width=3"], 2,
+         "has no hyper-parameter(s) ['width']; allowed: linear_size=1024"),
+        (["lifting", "baseline_3d", "--data", h5, "--hp", "linear_size=-1"], 2, "linear_size"),
+        (["lifting", "baseline_3d", "--resume", str(runs["classification"].run_dir)], 2,
+         "is a 'classification' run of model 'lstm'; it cannot continue as task 'lifting'"),
+        (["lifting", "baseline_3d", "--data", h5, "--noise", "-1"], 2, "noise must be >= 0.0"),
+    ]
+    for argv, code, message in cases:
+        assert train_main(argv + ["--out", str(out), "--quiet"]) == code, argv
+        assert message in capsys.readouterr().err, argv
+        assert _no_run(out), argv
+    # an existing run directory is never replaced without --force
+    run = runs["lifting"].run_dir
+    stamp = (run / "metrics.json").stat().st_mtime_ns
+    assert train_main(["lifting", "baseline_3d", "--data", h5, "--out", str(run)]) == 3
+    assert "exists; pass --force" in capsys.readouterr().err
+    assert (run / "metrics.json").stat().st_mtime_ns == stamp
+    # a checkpoint evaluated on a file converted without what its task needs
+    assert eval_main([str(runs["pose_estimation"].run_dir), "--data", h5]) == 1
+    assert "lacks ['frames/rgb'" in capsys.readouterr().err
+    assert eval_main([h5]) == 1
+    assert "expected a run directory or a .ckpt" in capsys.readouterr().err
+
+
+def test_help_lists_tasks_and_models(capsys):
+    with pytest.raises(SystemExit) as info:
+        train_main(["--help"])
+    assert info.value.code == 0
+    text = capsys.readouterr().out
+    for task in TINY:
+        assert f"  {task}:" in text
+    from bsp_fast import models
+
+    for name in models.available("lifting"):
+        assert f"    {name} " in text
+    for flag in ("--hp KEY=VALUE", "--precision", "--resume", "--config", "--mjp", "--strategy"):
+        assert flag in text
