@@ -106,3 +106,29 @@ def structure_parents() -> tuple:
 
     walk(_read_yaml("structure.yaml")["structure"], -1)
     return tuple(names), tuple(parents)
+
+
+@functools.lru_cache(maxsize=None)
+def _hips_neck(stem: str) -> float:
+    from .geometry import forward_kinematics
+
+    joints = forward_kinematics(reference_pose(stem))[:, :3]
+    return float(np.linalg.norm(joints[NECK] - joints[HIPS]))
+
+
+def hips_neck_length(age, gender):
+    """Hips-neck distance (metres) of the reference T-pose of an (age, gender) profile,
+    from forward kinematics of its reference skeleton: about 0.467 for adults, 0.284 for
+    ('child', 'female'), 0.320 for ('child', 'male').
+
+    ``age`` and ``gender`` are strings (-> float) or equally long sequences of strings, e.g.
+    a batch's ``meta["age"]`` and ``meta["gender"]`` (-> float64 array). Unknown values
+    raise ValueError listing the allowed ones.
+    """
+    if isinstance(age, str) and isinstance(gender, str):
+        return _hips_neck(model_name(age, gender))
+    if isinstance(age, str) or isinstance(gender, str) or len(age) != len(gender):
+        raise ValueError("age and gender must both be strings or equally long sequences, "
+                         f"got {age!r} and {gender!r}")
+    return np.array([_hips_neck(model_name(a, g)) for a, g in zip(age, gender)],
+                    dtype=np.float64)

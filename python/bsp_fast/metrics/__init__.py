@@ -1,0 +1,40 @@
+"""Metrics of the report's four tasks (see docs/metrics.md).
+
+Functional forms take NumPy arrays or torch tensors and return the same kind (a NumPy
+float64 scalar, or a 0-d float64 tensor on the input's device), accumulating in float64.
+Streaming forms (``torchmetrics.Metric`` subclasses: ``ClassificationMetrics``, ``PCK``,
+``MPJPE``, ``NMPJPE``, ``PAMPJPE``, ``MPJVE``, ``MaskedMSE``, ``MissingJointRatio``) sum
+errors and counts over batches and processes; they are imported on first access because
+importing torch takes seconds.
+"""
+from __future__ import annotations
+
+from .classification import (
+    accuracy,
+    confusion_counts,
+    confusion_matrix,
+    f1_score,
+    precision,
+    predicted_labels,
+    recall,
+)
+from .pose2d import PCKCounts, masked_mse, missing_joint_ratio, pck, pck_counts
+from .pose3d import denormalise_lifting, mpjpe, mpjve, n_mpjpe, pa_mpjpe, root_align
+
+_STREAMING = ("ClassificationMetrics", "PCK", "MPJPE", "NMPJPE", "PAMPJPE", "MPJVE",
+              "MaskedMSE", "MissingJointRatio")
+
+__all__ = [
+    "f1_score", "precision", "recall", "accuracy", "confusion_matrix", "confusion_counts",
+    "predicted_labels", "pck", "pck_counts", "PCKCounts", "missing_joint_ratio",
+    "masked_mse", "mpjpe", "n_mpjpe", "pa_mpjpe", "mpjve", "root_align",
+    "denormalise_lifting", *_STREAMING,
+]
+
+
+def __getattr__(name: str):
+    if name in _STREAMING:
+        from . import streaming
+
+        return getattr(streaming, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

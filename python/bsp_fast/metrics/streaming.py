@@ -1,0 +1,157 @@
+"""Streaming forms of the metrics: ``torchmetrics.Metric`` subclasses.
+
+Each keeps global sums and counts (float64 sums, int64 counts) over every ``update`` and
+gives the split's value in ``compute()``: the ratio of the sums, never a mean of batch
+means. States are reduced with ``dist_reduce_fx="sum"``, so under DDP ``compute()`` returns
+the value over all processes' data (Lightning's ``self.log(name, metric)`` or
+``metric.compute()``). Updates take tensors or NumPy arrays; the sums are those of the
+functional forms (``*_sums`` in :mod:`~bsp_fast.metrics.pose3d` and
+:mod:`~bsp_fast.metrics.pose2d`), so a split cut into any batches gives the one-shot value.
+"""
+from __future__ import annotations
+
+import torch
+from torchmetrics import Metric
+
+from . import classification as _cls
+from . import pose2d as _p2
+from . import pose3d as _p3
+
+__all__ = ["ClassificationMetrics", "PCK", "MPJPE", "NMPJPE", "PAMPJPE", "MPJVE",
+           "MaskedMSE", "MissingJointRatio"]
+
+
+def _accumulate(metric: Metric, name: str, value) -> None:
+    """``metric.<name> += value`` without a device round trip for tensors."""
+    state = getattr(metric, name)
+    setattr(metric, name, state + torch.as_tensor(value, device=state.device).to(state.dtype))
+
+
+class _Summed(Metric):
+    """``compute() = total / count`` over every update (NaN before any data)."""
+
+    is_differentiable = False
+    higher_is_better = False
+    full_state_update = False
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.add_state("total", torch.tensor(0.0, dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("count", torch.tensor(0, dtype=torch.int64), dist_reduce_fx="sum")
+
+    def _add(self, total, count) -> None:
+        _accumulate(self, "total", total)
+        _accumulate(self, "count", count)
+
+    def compute(self) -> torch.Tensor:
+        if int(self.count) == 0:
+            return torch.tensor(float("nan"), dtype=torch.float64, device=self.total.device)
+        return self.total / self.count
+
+
+class MPJPE(_Summed):
+    """Streaming :func:`~bsp_fast.metrics.mpjpe`: ``update(pred, gt)`` on ``(..., J, 3)``."""
+
+    def update(self, pred, gt) -> None:
+        self._add(*_p3.mpjpe_sums(pred, gt))
+
+
+class NMPJPE(_Summed):
+    """Streaming :func:`~bsp_fast.metrics.n_mpjpe`: ``update(pred, gt)``."""
+
+    def update(self, pred, gt) -> None:
+        self._add(*_p3.n_mpjpe_sums(pred, gt))
+
+
+class PAMPJPE(_Summed):
+    """Streaming :func:`~bsp_fast.metrics.pa_mpjpe`: ``update(pred, gt)``."""
+
+    def update(self, pred, gt) -> None:
+        self._add(*_p3.pa_mpjpe_sums(pred, gt))
+
+
+class MPJVE(_Summed):
+    """Streaming :func:`~bsp_fast.metrics.mpjve`: ``update(pred, gt)`` on clips
+    ``(B, L, J, 3)`` (differences inside each clip; clips of a batch never touch)."""
+
+    def update(self, pred, gt) -> None:
+        self._add(*_p3.mpjve_sums(pred, gt))
+
+
+class MaskedMSE(_Summed):
+    """Streaming :func:`~bsp_fast.metrics.masked_mse`: ``update(pred, target, mask=None)``."""
+
+    def update(self, pred, target, mask=None) -> None:
+        self._add(*_p2.masked_mse_sums(pred, target, mask))
+
+
+class MissingJointRatio(_Summed):
+    """Streaming :func:`~bsp_fast.metrics.missing_joint_ratio`: ``update(visible)``."""
+
+    def update(self, visible) -> None:
+        self._add(*_p2.missing_joint_ratio_sums(visible))
+
+
+class PCK(Metric):
+    """Streaming :func:`~bsp_fast.metrics.pck`: ``update(pred, gt, visible=None)`` on
+    ``(..., 26, 2)`` pixels; ``compute()`` -> fraction correct. ``skipped_frames`` /
+    ``scored_frames`` count the frames left out (degenerate normaliser) and kept."""
+
+    is_differentiable = False
+    higher_is_better = True
+    full_state_update = False
+
+    def __init__(self, alpha: float = 0.05, norm: str = "bbox", **kwargs):
+        _p2._check_options(alpha, norm)
+        super().__init__(**kwargs)
+        self.alpha, self.norm = float(alpha), norm
+        for name in ("correct", "joints", "frames", "skipped"):
+            self.add_state(name, torch.tensor(0, dtype=torch.int64), dist_reduce_fx="sum")
+
+    def update(self, pred, gt, visible=None) -> None:
+        terms = _p2._pck_terms(pred, gt, self.alpha, self.norm, visible)
+        for name, value in zip(("correct", "joints", "frames", "skipped"), terms):
+            _accumulate(self, name, value)
+
+    def compute(self) -> torch.Tensor:
+        if int(self.joints) == 0:
+            return torch.tensor(float("nan"), dtype=torch.float64, device=self.correct.device)
+        return self.correct.to(torch.float64) / self.joints
+
+    @property
+    def skipped_frames(self) -> int:
+        return int(self.skipped)
+
+    @property
+    def scored_frames(self) -> int:
+        return int(self.frames)
+
+
+class ClassificationMetrics(Metric):
+    """Streaming F1 / precision / recall / accuracy of the crossing class from summed
+    confusion counts: ``update(pred, target)`` (labels or logits, see
+    :mod:`~bsp_fast.metrics.classification`); ``compute()`` -> dict of float64 tensors
+    ``{"f1", "precision", "recall", "accuracy"}``; ``confusion_matrix()`` -> 2x2."""
+
+    is_differentiable = False
+    higher_is_better = True
+    full_state_update = False
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        for name in ("tp", "fp", "fn", "tn"):
+            self.add_state(name, torch.tensor(0, dtype=torch.int64), dist_reduce_fx="sum")
+
+    def update(self, pred, target) -> None:
+        for name, value in zip(("tp", "fp", "fn", "tn"), _cls.confusion_counts(pred, target)):
+            _accumulate(self, name, value)
+
+    def compute(self) -> dict:
+        scores = _cls.scores_from_counts(self.tp, self.fp, self.fn, self.tn)
+        return {k: torch.tensor(v, dtype=torch.float64, device=self.tp.device)
+                for k, v in scores.items()}
+
+    def confusion_matrix(self) -> torch.Tensor:
+        """``[[tn, fp], [fn, tp]]`` (rows = true class) of everything seen so far (this
+        process's counts; after ``compute()`` under DDP, while synced, the global ones)."""
+        return torch.stack([torch.stack([self.tn, self.fp]), torch.stack([self.fn, self.tp])])
