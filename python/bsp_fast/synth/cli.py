@@ -45,6 +45,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--apng-drop-duplicates", action="store_true", help="store identical "
                    "consecutive segmentation frames once, like the original writer (default: "
                    "one APNG frame per video frame)")
+    p.add_argument("--poses-only", action="store_true", help="write data.csv and config.yaml "
+                   "(with poses_only: true) but no MP4/APNG files: data.csv is byte-identical "
+                   "to a full run with the same options (media paths kept, in_segmentation "
+                   "still ray-cast), several times faster; for the pose tasks (bsp-convert "
+                   "--no-media)")
     p.add_argument("--force", action="store_true", help="replace OUT_DIR if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     return p
@@ -52,7 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _print_summary(s: dict) -> None:
     print(f"wrote {s['clips']} clips to {s['out_dir']} in {s['seconds']:.1f} s "
-          f"({s['clips_per_second']:.3f} clips/s)")
+          f"({s['clips_per_second']:.3f} clips/s)"
+          + ("; poses only: no MP4/APNG written" if s.get("poses_only") else ""))
     print(f"annotated frames: {s['annotated_frames']} of {s['frames']} "
           f"({100 * s['annotated_share']:.1f} %), crossing: {s['crossing_frames']} "
           f"({100 * s['crossing_share']:.1f} % of annotated), crossing clips: "
@@ -71,7 +77,8 @@ def main(argv=None) -> int:
         summary = generate(args.out_dir, args.preset, clips=args.clips, frames=args.frames,
                            size=args.size, fov=args.fov, seed=args.seed, workers=args.workers,
                            config=args.config, motion=args.motion,
-                           apng_drop_duplicates=args.apng_drop_duplicates, force=args.force,
+                           apng_drop_duplicates=args.apng_drop_duplicates,
+                           poses_only=args.poses_only, force=args.force,
                            progress=not args.quiet)
     except FileExistsError as e:
         print(f"bsp-synth: {e}", file=sys.stderr)

@@ -77,6 +77,9 @@ class SynthConfig:
     # direction by N(mean, std) metres (the original's "shifted driving lane waypoint").
     look_at_shift: tuple = (3.0, 3.0)
     apng_drop_duplicates: bool = False
+    # data.csv only (media paths recorded, no MP4/APNG written); data.csv is byte-identical
+    # to the full mode's: it changes no random draw.
+    poses_only: bool = False
     video_bitrate: int = 1_000_000
     video_preset: str = "veryfast"
     motion: str | None = None  # BVH / FBX / glTF file driving the body instead of the gait
@@ -114,6 +117,7 @@ class SynthConfig:
             "parallel_max_distance": self.parallel_max_distance,
             "look_at_shift": list(self.look_at_shift),
             "apng_drop_duplicates": self.apng_drop_duplicates,
+            "poses_only": self.poses_only,
             "video": {"codec": "h264", "pix_fmt": "yuv420p", "bitrate": self.video_bitrate,
                       "preset": self.video_preset},
             "segmentation": {"format": "apng", "palette": "cityscapes", "indices": "carla"},
@@ -204,7 +208,7 @@ _YAML_KEYS = {"number_of_clips", "clip_length_in_frames", "pedestrian_distributi
               "camera_image_size", "batch_size", "seed", "crossing_probability",
               "waypoint_radius", "parallel_max_distance", "look_at_shift",
               "apng_drop_duplicates", "outputs_dir", "overwrite", "failure_multiplier",
-              "waypoint_jitter_scale", "video_preset", "video_bitrate"}
+              "waypoint_jitter_scale", "video_preset", "video_bitrate", "poses_only"}
 X264_PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow",
                 "slower", "veryslow")
 
@@ -291,6 +295,8 @@ def make_config(preset: str = "sample", overrides: dict | None = None) -> SynthC
     for k in ("waypoint_radius", "parallel_max_distance"):
         if k in opts and not float(opts[k]) >= 0:
             raise ValueError(f"{k}: expected a non-negative number, got {opts[k]!r}")
+    if not isinstance(opts.get("poses_only", False), bool):
+        raise ValueError(f"poses_only: expected true or false, got {opts['poses_only']!r}")
     if opts.get("video_preset", "veryfast") not in X264_PRESETS:
         raise ValueError(f"video_preset: expected one of {X264_PRESETS}, "
                          f"got {opts['video_preset']!r}")

@@ -29,7 +29,10 @@ def _clip_job(cfg: SynthConfig, index: int, root: str, threads: int) -> dict:
     motion = mo.load(cfg.motion, float(cfg.fps)) if cfg.motion else None
     cp = cl.plan_clip(cfg, index, motion)
     per_frame = cl.pose_columns(cp, cfg)
-    visible = cl.render_clip(cp, cfg, per_frame, os.path.join(root, "clips"), threads)
+    if cfg.poses_only:  # the same in_segmentation flags, no media written
+        visible = cl.segmentation_visibility(cp, cfg, per_frame, threads)
+    else:
+        visible = cl.render_clip(cp, cfg, per_frame, os.path.join(root, "clips"), threads)
     cols = cl.csv_columns(cp, cfg, per_frame, visible)
     csvio.write_csv(os.path.join(root, PARTS, f"{index:06d}.csv"), cols,
                     threads=1 if threads == 1 else None)
@@ -51,13 +54,15 @@ def _append_part(out, part: str, header: bool) -> None:
 
 
 def _resolve(preset, clips, frames, size, fov, seed, config, motion,
-             apng_drop_duplicates) -> SynthConfig:
+             apng_drop_duplicates, poses_only=False) -> SynthConfig:
     overrides = load_yaml_config(config) if config else {}
     cli = dict(number_of_clips=clips, clip_length_in_frames=frames, camera_image_size=size,
                camera_fov=fov, seed=seed)
     overrides.update({k: v for k, v in cli.items() if v is not None})
     if apng_drop_duplicates:
         overrides["apng_drop_duplicates"] = True
+    if poses_only:
+        overrides["poses_only"] = True
     if motion is not None:
         path = os.path.abspath(os.fspath(motion))
         if not os.path.isfile(path):
@@ -92,14 +97,15 @@ def _summary(cfg: SynthConfig, stats: list, seconds: float, out_dir: str) -> dic
         "per_profile": dict(sorted(per_profile.items())), "seconds": seconds,
         "clips_per_second": len(stats) / seconds if seconds > 0 else 0.0,
         "ids": [s["id"] for s in stats], "seed": cfg.seed, "preset": cfg.preset,
+        "poses_only": cfg.poses_only,
     }
 
 
 def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
              frames: int | None = None, size=None, fov: float | None = None,
              seed: int | None = None, workers: int | None = None, config=None, motion=None,
-             apng_drop_duplicates: bool = False, force: bool = False,
-             progress: bool = True) -> dict:
+             apng_drop_duplicates: bool = False, poses_only: bool = False,
+             force: bool = False, progress: bool = True) -> dict:
     """Generates a CARLA-BSP-format dataset under ``out_dir`` and returns a summary dict.
 
     preset: ``sample`` (4 clips x 90 frames, 640x240) or ``full`` (396 x 900, 1600x600).
@@ -112,11 +118,17 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
         not depend on it.
     apng_drop_duplicates: drop identical consecutive segmentation frames (as the original
         writer did); default keeps one APNG frame per video frame.
+    poses_only: write data.csv (byte-identical to a full run with the same options) and
+        config.yaml (``poses_only: true``) but no MP4/APNG: the media paths stay in the
+        CSV, ``clips/`` is not created. The pedestrian is still ray-cast against the street
+        on the annotated frames to decide ``in_segmentation`` exactly; the video and
+        segmentation encoders, nearly all of the time, are skipped.
     force: replace an existing ``out_dir``.
 
     Summary keys: out_dir, clips, frames, annotated_frames, annotated_share,
     crossing_frames, crossing_share, crossing_clips, per_profile {name: {clips,
-    annotated_frames, crossing_clips}}, seconds, clips_per_second, ids, seed, preset.
+    annotated_frames, crossing_clips}}, seconds, clips_per_second, ids, seed, preset,
+    poses_only.
     """
     from .. import __version__
 
@@ -124,8 +136,10 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
     out_dir = os.path.abspath(os.fspath(out_dir))
     if os.path.exists(out_dir) and not force:
         raise FileExistsError(f"{out_dir} exists; pass force=True (--force) to replace it")
+    if not isinstance(poses_only, bool):
+        raise ValueError(f"poses_only: expected True or False, got {poses_only!r}")
     cfg = _resolve(preset, clips, frames, size, fov, seed, config, motion,
-                   apng_drop_duplicates)
+                   apng_drop_duplicates, poses_only)
     n = cfg.number_of_clips
     if workers is None:
         workers = min(os.cpu_count() or 1, n)
@@ -139,7 +153,8 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; a dataset is not
     try:
-        os.makedirs(os.path.join(tmp, "clips"))
+        if not cfg.poses_only:
+            os.makedirs(os.path.join(tmp, "clips"))
         os.makedirs(os.path.join(tmp, PARTS))
         stats = _run_clips(cfg, tmp, workers, progress)
         _write_config(cfg, tmp, __version__)
