@@ -22,16 +22,21 @@ import os
 import sys
 import threading
 import time
+import warnings
 from pathlib import Path
 
 from ._native import core as _core
+from .convert_report import ProgressBars, format_report, problems, verify_table
 
-__all__ = ["convert", "main", "format_report", "frame_media", "crop_resize", "DEFAULTS"]
+__all__ = ["convert", "conversion_settings", "main", "format_report", "frame_media",
+           "crop_resize", "DEFAULTS", "UnusableConversion"]
 
 DEFAULTS = dict(clip_length=30, benchmark_clip_length=16, benchmark_clip_offset=6,
                 val_frac=0.2, test_frac=0.2, seed=22742, fov=90.0)
-_STAGES = ("reading data.csv", "planning clips", "verifying poses", "writing clips", "done",
-           "checking media files", "cropping media frames")
+
+
+class UnusableConversion(ValueError):
+    """``strict=True`` and the conversion has an empty split or a single-class split."""
 
 
 def frame_media(tags, uv) -> dict:
@@ -112,20 +117,63 @@ def _positive(name, v, allow_none=True):
         raise ValueError(f"{name} must be a positive integer, got {v!r}")
 
 
+def conversion_settings(dataset, *, clip_length=None, clip_offset=None, eval_clip_offset=None,
+                        fov=None, min_video_length=None, label="last", benchmark=False,
+                        val_frac=0.2, test_frac=0.2, seed=22742, balance=False, compress=False,
+                        media=True, crop_size=128, skip_bad_media=False) -> dict:
+    """The validated, fully resolved options that decide what :func:`convert` writes (the
+    ``settings`` of its report and the ``settings_json`` attribute of the file): defaults
+    filled in, the FOV looked up in the dataset's config.yaml. Raises ValueError."""
+    root, _ = _dataset_csv(dataset)
+    if clip_length is None:
+        clip_length = DEFAULTS["benchmark_clip_length"] if benchmark else DEFAULTS["clip_length"]
+    if clip_offset is None:
+        clip_offset = DEFAULTS["benchmark_clip_offset"] if benchmark else clip_length
+    for name, v in (("clip_length", clip_length), ("clip_offset", clip_offset),
+                    ("eval_clip_offset", eval_clip_offset), ("min_video_length", min_video_length)):
+        _positive(name, v)
+    if not isinstance(crop_size, int) or isinstance(crop_size, bool) or not 8 <= crop_size <= 1024:
+        raise ValueError(f"crop_size must be an integer in [8, 1024], got {crop_size!r}")
+    for name, v in (("val_frac", val_frac), ("test_frac", test_frac)):
+        if not (isinstance(v, (int, float)) and 0 <= v < 1):
+            raise ValueError(f"{name} must lie in [0, 1), got {v!r}")
+    if val_frac + test_frac >= 1:
+        raise ValueError("val_frac + test_frac must be below 1")
+    _label_fraction(label)
+    fov_source = "argument"
+    if fov is None:
+        fov, fov_source = _dataset_fov(root), "config.yaml"
+        if fov is None:
+            fov, fov_source = DEFAULTS["fov"], "default"
+    if not (0 < float(fov) < 180):
+        raise ValueError(f"fov must lie in (0, 180) degrees, got {fov!r}")
+    return dict(clip_length=clip_length, clip_offset=clip_offset,
+                eval_clip_offset=eval_clip_offset or clip_offset,
+                min_video_length=min_video_length or clip_length, label=label,
+                benchmark=bool(benchmark), val_frac=val_frac, test_frac=test_frac,
+                seed=int(seed), balance=bool(balance), fov=float(fov), fov_source=fov_source,
+                compress=bool(compress), media=bool(media),
+                crop_size=int(crop_size) if media else None,
+                skip_bad_media=bool(skip_bad_media) if media else None)
+
+
 def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_offset=None,
             fov=None, min_video_length=None, label="last", benchmark=False, val_frac=0.2,
             test_frac=0.2, seed=22742, balance=False, threads=None, verify=False,
             compress=False, media=True, crop_size=128, skip_bad_media=False, force=False,
-            progress=False) -> dict:
+            progress=None, strict=False) -> dict:
     """Converts a CARLA-BSP dataset into train/val/test clips in one HDF5 file.
 
     ``dataset`` is the dataset directory (or its data.csv). ``clip_length`` defaults to 30
     (16 with ``benchmark``), ``clip_offset`` to the clip length (6 with ``benchmark``),
     ``eval_clip_offset`` to ``clip_offset``. ``label`` is ``'last'`` (is_crossing of the
     last frame) or ``'any:F'`` (any of the last ceil(L*F) frames). ``benchmark`` selects the
-    time-to-event windows with video-level labels. ``fov`` defaults to the dataset's
-    config.yaml, else 90 degrees. The output is written under a temporary name and renamed
-    when complete; an existing ``out_path`` is kept unless ``force``.
+    time-to-event windows with video-level labels (it does not balance: add ``balance``).
+    The split is by recording: ``test_frac`` of all clips go to test, then ``val_frac`` of
+    the clips that remain go to validation (each at least one clip, whole recordings), so
+    the defaults give about 20 % test and 16 % validation clips. ``fov`` defaults to the
+    dataset's config.yaml, else 90 degrees. The output is written under a temporary name
+    and renamed when complete; an existing ``out_path`` is kept unless ``force``.
 
     ``media`` (default on) decodes each recording's MP4 and segmentation APNG once and
     stores ``crop_size`` x ``crop_size`` pedestrian crops (RGB and class tags), mask
@@ -136,50 +184,36 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
     dataset root (``..``) are refused before anything is opened. ``compress`` deflates the
     large pose targets and the RGB crops (about 2.5x smaller, much slower random reads).
 
+    ``progress`` (default: when stderr is a terminal) shows a bar per stage. An empty split
+    or a split with a single class is listed in ``report["warnings"]`` and warned about
+    (``UserWarning``); ``strict`` raises :class:`UnusableConversion` instead and writes
+    nothing.
+
     Returns the report: rows, recordings, clips per split and class, skipped recordings
     and why, seconds per stage, ``media`` (frames per split, seconds, crops_per_second,
-    bad files and why) and, with ``verify``, the verification table.
+    bad files and why), ``warnings``, ``settings`` and, with ``verify``, the verification
+    table.
     """
     root, csv = _dataset_csv(dataset)
     out = Path(out_path)
     if out.exists() and not force:
         raise FileExistsError(f"{out} exists; pass force=True (--force) to overwrite it")
-    if clip_length is None:
-        clip_length = DEFAULTS["benchmark_clip_length"] if benchmark else DEFAULTS["clip_length"]
-    if clip_offset is None:
-        clip_offset = DEFAULTS["benchmark_clip_offset"] if benchmark else clip_length
-    for name, v in (("clip_length", clip_length), ("clip_offset", clip_offset),
-                    ("eval_clip_offset", eval_clip_offset), ("min_video_length", min_video_length),
-                    ("threads", threads)):
-        _positive(name, v)
-    if not isinstance(crop_size, int) or isinstance(crop_size, bool) or not 8 <= crop_size <= 1024:
-        raise ValueError(f"crop_size must be an integer in [8, 1024], got {crop_size!r}")
-    for name, v in (("val_frac", val_frac), ("test_frac", test_frac)):
-        if not (isinstance(v, (int, float)) and 0 <= v < 1):
-            raise ValueError(f"{name} must lie in [0, 1), got {v!r}")
-    if val_frac + test_frac >= 1:
-        raise ValueError("val_frac + test_frac must be below 1")
-    fov_source = "argument"
-    if fov is None:
-        fov, fov_source = _dataset_fov(root), "config.yaml"
-        if fov is None:
-            fov, fov_source = DEFAULTS["fov"], "default"
-    if not (0 < float(fov) < 180):
-        raise ValueError(f"fov must lie in (0, 180) degrees, got {fov!r}")
-    settings = dict(clip_length=clip_length, clip_offset=clip_offset,
-                    eval_clip_offset=eval_clip_offset or clip_offset,
-                    min_video_length=min_video_length or clip_length, label=label,
-                    benchmark=bool(benchmark), val_frac=val_frac, test_frac=test_frac,
-                    seed=int(seed), balance=bool(balance), fov=float(fov), fov_source=fov_source,
-                    compress=bool(compress), media=bool(media),
-                    crop_size=int(crop_size) if media else None,
-                    skip_bad_media=bool(skip_bad_media) if media else None)
-    options = dict(clip_length=clip_length, clip_stride=clip_offset,
+    settings = conversion_settings(
+        dataset, clip_length=clip_length, clip_offset=clip_offset,
+        eval_clip_offset=eval_clip_offset, fov=fov, min_video_length=min_video_length,
+        label=label, benchmark=benchmark, val_frac=val_frac, test_frac=test_frac, seed=seed,
+        balance=balance, compress=compress, media=media, crop_size=crop_size,
+        skip_bad_media=skip_bad_media)
+    _positive("threads", threads)
+    if progress is None:
+        progress = _is_terminal(sys.stderr)
+    st = settings
+    options = dict(clip_length=st["clip_length"], clip_stride=st["clip_offset"],
                    eval_clip_stride=eval_clip_offset or 0, min_video_length=min_video_length or 0,
-                   label_fraction=_label_fraction(label), benchmark=bool(benchmark),
-                   val_frac=float(val_frac), test_frac=float(test_frac), seed=int(seed),
-                   balance=bool(balance), fov=float(fov), threads=int(threads or 0),
-                   verify=bool(verify), compress=bool(compress), media=bool(media),
+                   label_fraction=_label_fraction(label), benchmark=st["benchmark"],
+                   val_frac=float(val_frac), test_frac=float(test_frac), seed=st["seed"],
+                   balance=st["balance"], fov=st["fov"], threads=int(threads or 0),
+                   verify=bool(verify), compress=st["compress"], media=st["media"],
                    crop_size=int(crop_size), skip_bad_media=bool(skip_bad_media),
                    source_path=str(root.resolve()),
                    extra_attrs={"settings_json": json.dumps(settings, sort_keys=True)})
@@ -187,13 +221,26 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
     tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")
     try:
         report = _run(str(csv), str(tmp), options, progress)
+        report["warnings"] = problems(report)
+        if strict and report["warnings"]:
+            raise UnusableConversion(f"{root}: unusable conversion (strict): "
+                                     + "; ".join(report["warnings"]) + "; nothing written")
         os.replace(tmp, out)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     report["output"] = str(out)
     report["settings"] = settings
+    for w in report["warnings"]:
+        warnings.warn(f"bsp_fast.convert: {w} ({out})", UserWarning, stacklevel=2)
     return report
+
+
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
 
 
 def _run(csv: str, tmp: str, options: dict, show_progress: bool) -> dict:
@@ -210,24 +257,16 @@ def _run(csv: str, tmp: str, options: dict, show_progress: bool) -> dict:
     t = threading.Thread(target=work, name="bsp-convert", daemon=True)
     t0 = time.perf_counter()
     t.start()
-    bar, stage = None, -1
+    bars = ProgressBars(show_progress)
     try:
         while t.is_alive():
             t.join(0.1)
-            if not show_progress:
-                continue
-            if prog.stage != stage:
-                stage = prog.stage
-                if bar is not None:
-                    bar.close()
-                bar = _bar(stage, prog.total)
-            if bar is not None:
-                bar.total = prog.total
-                bar.n = prog.done
-                bar.refresh()
+            if show_progress:
+                stage, total, done = prog.stage, prog.total, prog.done
+                if prog.stage == stage:  # a consistent snapshot (no stage change in between)
+                    bars.poll(stage, total, done)
     finally:
-        if bar is not None:
-            bar.close()
+        bars.close(completed="report" in result)
     if "error" in result:
         raise result["error"]
     report = result["report"]
@@ -240,73 +279,26 @@ def _run(csv: str, tmp: str, options: dict, show_progress: bool) -> dict:
     return report
 
 
-def _bar(stage: int, total: int):
-    from tqdm import tqdm
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows "(default: X)" only where the option has a real default that the help text
+    does not already explain."""
 
-    name = _STAGES[min(stage, len(_STAGES) - 1)]
-    if stage == 0:
-        return tqdm(total=total, desc=name, unit="row", unit_scale=True, file=sys.stderr)
-    if stage == 3:
-        return tqdm(total=total, desc=name, unit="clip", file=sys.stderr)
-    if stage == 5:
-        return tqdm(total=total, desc=name, unit="recording", file=sys.stderr)
-    if stage == 6:
-        return tqdm(total=total, desc=name, unit="frame", file=sys.stderr)
-    return None
-
-
-def format_report(r: dict) -> str:
-    """A plain-text summary table of a conversion report."""
-    lines = [f"{'split':6s} {'clips':>7s} {'not-crossing':>13s} {'crossing':>9s} {'recordings':>11s}"]
-    for name in ("train", "val", "test"):
-        s = r["splits"][name]
-        lines.append(f"{name:6s} {s['clips']:7d} {s['not-crossing']:13d} {s['crossing']:9d} "
-                     f"{s['recordings']:11d}")
-    sec = r["seconds"]
-    rate = r["rows"] / sec["read"] if sec.get("read") else math.nan
-    mb = r["source_bytes"] / 1e6
-    lines.append(f"rows {r['rows']}, recordings {r['recordings']}, skipped {len(r['skipped'])}, "
-                 f"windows outside the image {r['clips_rejected_out_of_image']}, "
-                 f"dropped by balancing {r['clips_dropped_by_balance']}")
-    lines.append(f"read {sec.get('read', 0):.2f} s ({rate:,.0f} rows/s, "
-                 f"{mb / max(sec.get('read', 1e-9), 1e-9):,.0f} MB/s), plan {sec.get('plan', 0):.2f} s, "
-                 + (f"verify {sec['verify']:.2f} s, " if "verify" in sec else "")
-                 + f"write {sec.get('write', 0):.2f} s, total {sec.get('total', 0):.2f} s")
-    media = r.get("media", {})
-    if media.get("enabled"):
-        fr = media["frames"]
-        lines.append(f"media: {sum(fr.values())} frames (train {fr['train']}, val {fr['val']}, "
-                     f"test {fr['test']}), {sec.get('media', 0):.2f} s, "
-                     f"{media['crops_per_second']:,.0f} crops/s, "
-                     f"{len(media['bad'])} bad media files left out")
-        for path, why in media["bad"][:20]:
-            lines.append(f"  left out {path}: {why}")
-    for rec, why in r["skipped"][:20]:
-        lines.append(f"  skipped {rec}: {why}")
-    if len(r["skipped"]) > 20:
-        lines.append(f"  ... and {len(r['skipped']) - 20} more skipped recordings")
-    return "\n".join(lines)
-
-
-def _verify_table(r: dict) -> str:
-    rows = sorted(r["verify"], key=lambda v: -max(v["component_mm"], v["world_mm"]))
-    out = [f"{'recording':60s} {'component mm':>13s} {'world mm':>9s} {'camera px':>10s}"]
-    for v in rows[:15]:
-        out.append(f"{v['recording'][:60]:60s} {v['component_mm']:13.3f} {v['world_mm']:9.3f} "
-                   f"{v['camera_px']:10.3f}")
-    out.append(f"{len(r['verify_failed'])} of {len(rows)} recordings beyond tolerance")
-    out += [f"  beyond tolerance: {name}" for name in r["verify_failed"][:50]]
-    return "\n".join(out)
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if action.default is None or action.default is False or "default" in text:
+            return text
+        return super()._get_help_string(action)
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="bsp-convert",
         description="Convert a CARLA-BSP dataset (data.csv + clips/) into train/val/test clips "
-                    "in one HDF5 file. Exit codes: 0 success, 1 bad input or I/O error, 2 bad "
-                    "arguments, 3 output exists (use --force), 4 --verify found recordings "
-                    "beyond tolerance, 130 interrupted.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                    "in one HDF5 file.",
+        epilog="Exit codes: 0 success, 1 bad input, I/O error, or (--strict) an unusable "
+               "result, 2 bad arguments, 3 output exists (use --force), 4 --verify found "
+               "recordings beyond tolerance, 130 interrupted.",
+        formatter_class=_HelpFormatter)
     p.add_argument("dataset", help="dataset directory holding data.csv (or the data.csv itself)")
     p.add_argument("output", help="HDF5 file to write (written to a temporary name, then renamed)")
     p.add_argument("--clip-length", type=int, default=None, metavar="L",
@@ -325,9 +317,16 @@ def _parser() -> argparse.ArgumentParser:
                    help="clip label: is_crossing of the last frame, or of any of the last "
                         "ceil(L*F) frames")
     p.add_argument("--benchmark", action="store_true",
-                   help="time-to-event windows of the crossing benchmark (video-level labels)")
-    p.add_argument("--val-frac", type=float, default=0.2, help="share of clips for validation")
-    p.add_argument("--test-frac", type=float, default=0.2, help="share of clips for testing")
+                   help="time-to-event windows of the crossing benchmark (video-level labels; "
+                        "16/6 clips). It does not balance the train split: add --balance for "
+                        "the report's setup (BSPDataModule.benchmark() does both)")
+    p.add_argument("--test-frac", type=float, default=0.2, metavar="F",
+                   help="test split: F of ALL clips, rounded down, at least one (whole "
+                        "recordings, so about F)")
+    p.add_argument("--val-frac", type=float, default=0.2, metavar="F",
+                   help="validation split: F of the clips LEFT AFTER the test split, rounded "
+                        "down, at least one (default 0.2; with --test-frac 0.2 that is about "
+                        "20%% test, 16%% val and 64%% train clips)")
     p.add_argument("--seed", type=int, default=22742, help="seed of the split shuffle")
     p.add_argument("--balance", action="store_true",
                    help="balance the train split's classes (keep min class count of each)")
@@ -345,26 +344,36 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--verify", action="store_true",
                    help="check relative/component/world columns agree (mm) and pose.camera "
                         "matches the projection of pose.world (px), per recording")
+    p.add_argument("--strict", action="store_true",
+                   help="an empty split or a split with a single class is an error (exit 1, "
+                        "nothing written) instead of a warning")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
-    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bars or summary (warnings are still printed); bars are "
+                        "shown only when stderr is a terminal")
     return p
 
 
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     try:
-        report = convert(args.dataset, args.output, clip_length=args.clip_length,
-                         clip_offset=args.clip_offset, eval_clip_offset=args.eval_clip_offset,
-                         fov=args.fov, min_video_length=args.min_video_length, label=args.label,
-                         benchmark=args.benchmark, val_frac=args.val_frac,
-                         test_frac=args.test_frac, seed=args.seed, balance=args.balance,
-                         threads=args.threads, verify=args.verify, compress=args.compress,
-                         media=not args.no_media, crop_size=args.crop_size,
-                         skip_bad_media=args.skip_bad_media, force=args.force,
-                         progress=not args.quiet)
+        with warnings.catch_warnings():  # printed below, once, in the summary
+            warnings.simplefilter("ignore", UserWarning)
+            report = convert(
+                args.dataset, args.output, clip_length=args.clip_length,
+                clip_offset=args.clip_offset, eval_clip_offset=args.eval_clip_offset,
+                fov=args.fov, min_video_length=args.min_video_length, label=args.label,
+                benchmark=args.benchmark, val_frac=args.val_frac, test_frac=args.test_frac,
+                seed=args.seed, balance=args.balance, threads=args.threads, verify=args.verify,
+                compress=args.compress, media=not args.no_media, crop_size=args.crop_size,
+                skip_bad_media=args.skip_bad_media, force=args.force,
+                progress=False if args.quiet else None, strict=args.strict)
     except FileExistsError as exc:
         print(f"bsp-convert: {exc}", file=sys.stderr)
         return 3
+    except UnusableConversion as exc:
+        print(f"bsp-convert: {exc}", file=sys.stderr)
+        return 1
     except ValueError as exc:
         print(f"bsp-convert: {exc}", file=sys.stderr)
         return 2
@@ -377,8 +386,11 @@ def main(argv=None) -> int:
     if not args.quiet:
         print(format_report(report))
         if args.verify:
-            print(_verify_table(report))
+            print(verify_table(report))
         print(f"wrote {report['output']}")
+    elif report["warnings"]:
+        for w in report["warnings"]:
+            print(f"bsp-convert: WARNING: {w}", file=sys.stderr)
     if args.verify and report["verify_failed"]:
         return 4
     return 0

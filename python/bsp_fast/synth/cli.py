@@ -7,6 +7,15 @@ import sys
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_EXISTS, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
 
+def _preset(name: str) -> str:
+    """'N clips x F frames at WxH' of a preset, from the preset table itself."""
+    from .config import PRESETS
+
+    p = PRESETS[name]
+    w, h = p["camera_image_size"]
+    return f"{p['number_of_clips']} clips x {p['clip_length_in_frames']} frames at {w}x{h}"
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="bsp-synth",
@@ -19,9 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("out_dir", metavar="OUT_DIR", help="output directory (must not exist "
                    "unless --force); built as OUT_DIR.tmp-* and renamed when complete")
     p.add_argument("--preset", choices=("sample", "full"), default="sample",
-                   help="sample: 4 clips x 90 frames at 640x240 (seconds); full: 396 clips x "
-                        "900 frames at 1600x600, the published dataset's shape (default: "
-                        "%(default)s)")
+                   help=f"sample: {_preset('sample')} (seconds); full: {_preset('full')}, the "
+                        "published dataset's shape (default: %(default)s)")
     p.add_argument("--clips", type=int, metavar="N", help="number of clips (overrides preset "
                    "and config number_of_clips)")
     p.add_argument("--frames", type=int, metavar="N", help="frames per clip at 30 fps "
