@@ -30,7 +30,7 @@ test-python:
 
 demo: install
 	$(PY) -m bsp_fast synth demo-out/dataset --preset sample --force
-	$(PY) -m bsp_fast convert demo-out/dataset demo-out/clips.h5 --verify --force
+	$(PY) -m bsp_fast convert demo-out/dataset demo-out/clips.h5 --verify --strict --force
 	$(PY) tools/h5_summary.py demo-out/clips.h5
 
 # The speed comparisons behind the README's tables (several minutes; not part of the tests).
