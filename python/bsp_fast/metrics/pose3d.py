@@ -103,13 +103,17 @@ def mpjve(pred, gt):
 
 def root_align(pred, gt, root: int = HIPS):
     """``pred`` translated per frame so that its joint ``root`` sits on ``gt``'s
-    (``(..., J, D)``, same kind as ``pred``; default root: the hips)."""
+    (``(..., J, D)``; the kind and float dtype of ``pred``; default root: the hips)."""
     s = check_pair(pred, gt, shape_of(pred)[-1] if shape_of(pred) else 3, "(..., J, D)")
     expect(-s[-2] <= root < s[-2], "root", f"a joint index in [0, {s[-2]})", root)
     kind = Kind(pred, gt)
     p, g = kind.native(pred), kind.native(gt)
-    if kind.torch and not p.is_floating_point():
-        p = p.double()
+    if kind.torch:
+        p = p if p.is_floating_point() else p.double()
+        g = g.to(p.dtype)
+    else:
+        p = p if np.issubdtype(p.dtype, np.floating) else p.astype(np.float64)
+        g = g.astype(p.dtype, copy=False)
     return p - p[..., root:root + 1, :] + g[..., root:root + 1, :]
 
 
