@@ -401,7 +401,8 @@ def test_streaming_equals_one_shot_on_uneven_batches():
             batch = [a[part] for a in args]
             metric.update(*(torch.tensor(b) if k % 2 else b for b in batch))
         assert _value(metric) == pytest.approx(float(one_shot), rel=1e-12), type(metric)
-    assert math.isnan(float(M.MPJPE().compute()))
+    with pytest.warns(UserWarning, match="before the ``update``"):
+        assert math.isnan(float(M.MPJPE().compute()))
     pck = M.PCK(0.05)
     g = np.zeros((2, J, 2))
     g[:, sk.HIPS] = 5
@@ -437,4 +438,6 @@ def test_streaming_reduces_across_two_gloo_processes():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    mp.spawn(_ddp_rank, args=(port,), nprocs=2)
+    # fork: the children inherit the imported torch/torchmetrics (spawn re-imports them,
+    # ~10 s on a busy 2-core machine)
+    mp.start_processes(_ddp_rank, args=(port,), nprocs=2, start_method="fork")
