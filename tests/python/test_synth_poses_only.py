@@ -106,3 +106,16 @@ def test_cli_option_and_checks(tmp_path, capsys):
                    "camera_image_size: [64, 48]\n")
     s = generate(tmp_path / "y", config=cfg, workers=1, progress=False)
     assert s["poses_only"] and not (tmp_path / "y" / "clips").exists()
+
+
+def test_sample_preset_gives_both_classes_in_every_split(tmp_path):
+    """`make demo` converts the sample preset with default options (and --strict): every
+    split must hold crossing and non-crossing clips. Poses-only writes the same data.csv,
+    and the clip counts do not depend on media."""
+    import bsp_fast as bf
+
+    generate(tmp_path / "s", "sample", workers=1, poses_only=True, progress=False)
+    rep = bf.convert(tmp_path / "s", tmp_path / "s.h5", media=False)
+    counts = {k: (rep["splits"][k]["not-crossing"], rep["splits"][k]["crossing"])
+              for k in ("train", "val", "test")}
+    assert all(n > 0 and c > 0 for n, c in counts.values()), counts

@@ -48,9 +48,10 @@ DEFAULT_PROFILES = {
 }
 
 PRESETS = {
-    # Small enough for tests and `make demo` (seconds on 2 cores); 5 s clips so that some
-    # crossing walkers reach the road.
-    "sample": dict(number_of_clips=4, clip_length_in_frames=150, camera_image_size=(640, 240)),
+    # Small enough for tests and `make demo` (seconds on 2 cores): 5 s clips, so that some
+    # crossing walkers reach the road, and enough of them (20) that the default conversion
+    # (L = 30) puts crossing and non-crossing clips in each of train, val and test.
+    "sample": dict(number_of_clips=20, clip_length_in_frames=150, camera_image_size=(640, 240)),
     # The published CARLA-BSP shape (SPEC section 1).
     "full": dict(number_of_clips=396, clip_length_in_frames=900, camera_image_size=(1600, 600)),
 }
