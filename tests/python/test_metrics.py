@@ -300,6 +300,12 @@ def test_pose3d_against_slow_references():
     t = M.pa_mpjpe(torch.tensor(p, dtype=torch.float32), torch.tensor(g, dtype=torch.float32))
     assert t.dtype == torch.float64 and t.item() == pytest.approx(ref_pa_mpjpe(p, g), rel=1e-5)
     assert isinstance(M.mpjpe(p, g), np.float64)
+    # the torch implementation of the batched Procrustes (used on GPUs), run on the CPU
+    from bsp_fast.metrics import _arrays, pose3d
+
+    tp, tg = torch.tensor(p), torch.tensor(g)
+    total = pose3d._pa_total(_arrays.Kind(tp, tg), tp, tg, chunk=16)
+    assert total.item() / p[..., 0].size == pytest.approx(ref_pa_mpjpe(p, g), rel=1e-10)
 
 
 def test_reference_procrustes_is_optimal():

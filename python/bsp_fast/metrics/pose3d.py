@@ -64,17 +64,26 @@ def pa_mpjpe_sums(pred, gt, chunk: int | None = None):
     """(sum of joint errors, number of joints) for :func:`pa_mpjpe`."""
     s = check_pair(pred, gt, 3, POSES)
     kind = Kind(pred, gt)
-    J = s[-2]
+    if kind.torch and kind.device.type == "cpu":  # NumPy is faster on these array sizes
+        np_kind = Kind(None)
+        p, g = (x.detach().numpy() if hasattr(x, "detach") else np.asarray(x)
+                for x in (pred, gt))
+        return kind.scalar(_pa_total(np_kind, p, g, chunk or CHUNK)), int(np.prod(s[:-1]))
+    return _pa_total(kind, pred, gt, chunk or (CHUNK if not kind.torch else 1 << 18)), \
+        int(np.prod(s[:-1]))
+
+
+def _pa_total(kind, pred, gt, chunk: int):
+    """Sum of the Procrustes-aligned joint errors, in blocks of ``chunk`` frames."""
+    J = pred.shape[-2]
     p, g = kind.native(pred).reshape(-1, J, 3), kind.native(gt).reshape(-1, J, 3)
-    if chunk is None:
-        chunk = CHUNK if not (kind.torch and kind.device.type != "cpu") else 1 << 18
     total = None
     for start in range(0, p.shape[0], chunk):
         err = _procrustes.aligned_errors(kind, kind.planes(g, start, start + chunk),
                                          kind.planes(p, start, start + chunk))
         part = kind.sum(err)
         total = part if total is None else total + part
-    return total, int(np.prod(s[:-1]))
+    return total
 
 
 def pa_mpjpe(pred, gt):
