@@ -88,9 +88,6 @@ class Kind:
         """Sum of all entries as a float64 0-d value."""
         return x.sum() if self.torch else np.sum(x, dtype=np.float64)
 
-    def count(self, mask) -> int:
-        return int(mask.sum())
-
     def isfinite(self, x):
         return self.xp.isfinite(x)
 
