@@ -39,6 +39,10 @@ class UnusableConversion(ValueError):
     """``strict=True`` and the conversion has an empty split or a single-class split."""
 
 
+class BadDataset(ValueError):
+    """The dataset cannot be converted as it is (e.g. a malformed config.yaml): exit 1."""
+
+
 def frame_media(tags, uv) -> dict:
     """The per-frame media values bsp-convert stores, for one segmentation frame.
 
@@ -81,20 +85,46 @@ def _dataset_csv(dataset) -> tuple[Path, Path]:
 
 
 def _dataset_fov(root: Path):
-    """FOV from a bsp-synth config.yaml beside data.csv, if there is one."""
+    """FOV from a bsp-synth config.yaml beside data.csv, if there is one; BadDataset when
+    the file is not YAML, its top level not a mapping, or its FOV not a number in (0, 180)."""
     cfg = root / "config.yaml"
     if not cfg.is_file():
         return None
     import yaml
 
     try:
-        doc = yaml.safe_load(cfg.read_text(encoding="utf-8")) or {}
-    except yaml.YAMLError:
+        doc = yaml.safe_load(cfg.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise BadDataset(f"{cfg}: not a readable YAML file: {exc}") from None
+    if doc is None:
         return None
+    if not isinstance(doc, dict):
+        raise BadDataset(f"{cfg}: expected a mapping (key: value lines) at the top level, "
+                         f"found a {type(doc).__name__}")
     for key in ("fov", "camera_fov"):
-        if isinstance(doc.get(key), (int, float)):
-            return float(doc[key])
+        if key in doc:
+            v = doc[key]
+            if (not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v)
+                    or not 0 < v < 180):
+                raise BadDataset(f"{cfg}: {key} must be a number of degrees in (0, 180), "
+                                 f"got {v!r}")
+            return float(v)
     return None
+
+
+def _refuse_inputs_as_output(root: Path, csv: Path, out: Path) -> None:
+    """ValueError when `out` is (or resolves, through symlinks, to) one of the dataset's
+    inputs: data.csv, config.yaml, or a media or CSV file inside the dataset directory."""
+    real = Path(os.path.realpath(out))
+    for inp in (csv, root / "config.yaml"):
+        if real == Path(os.path.realpath(inp)) or (
+                out.exists() and inp.exists() and os.path.samefile(out, inp)):
+            raise ValueError(f"output {out} is the dataset's input {inp}; refusing to "
+                             "overwrite it (choose another output path)")
+    inside = Path(os.path.realpath(root)) in real.parents
+    if inside and real.suffix.lower() in (".csv", ".mp4", ".apng", ".png", ".yaml"):
+        raise ValueError(f"output {out} would replace the dataset's {real.suffix} file "
+                         f"{real}; refusing to overwrite an input (choose another output path)")
 
 
 def _label_fraction(label: str) -> float:
@@ -196,6 +226,7 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
     """
     root, csv = _dataset_csv(dataset)
     out = Path(out_path)
+    _refuse_inputs_as_output(root, csv, out)
     if out.exists() and not force:
         raise FileExistsError(f"{out} exists; pass force=True (--force) to overwrite it")
     settings = conversion_settings(
@@ -371,7 +402,7 @@ def main(argv=None) -> int:
     except FileExistsError as exc:
         print(f"bsp-convert: {exc}", file=sys.stderr)
         return 3
-    except UnusableConversion as exc:
+    except (UnusableConversion, BadDataset) as exc:
         print(f"bsp-convert: {exc}", file=sys.stderr)
         return 1
     except ValueError as exc:

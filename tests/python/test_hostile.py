@@ -1,0 +1,140 @@
+"""Hostile and broken datasets (issue 15): each defect answered with a typed error naming the
+file and the reason, exit 1 (bad data) or 2 (bad arguments), and no input ever destroyed."""
+import csv
+import io
+import os
+
+import pytest
+
+import bsp_fast as bf
+from bsp_fast import conversion as cv
+from bsp_testdata import recording, write_dataset
+
+pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")  # tiny datasets: empty splits
+
+U1 = "094b9fe1-babe-48d5-bd17-3ba3185690c5-0"
+
+
+@pytest.fixture()
+def ds(tmp_path):
+    return write_dataset(tmp_path / "ds", recording(U1, range(20)))
+
+
+def convert(ds, out, **kw):
+    return cv.convert(ds, out, clip_length=10, media=False, **kw)
+
+
+def cli(ds, out, *extra):
+    return cv.main(["--no-media", "--quiet", "--clip-length", "10", str(ds), str(out), *extra])
+
+
+# ---------------------------------------------------------------- item 8: outputs that are inputs
+
+def test_force_never_overwrites_data_csv(ds, capsys):
+    data_csv = ds / "data.csv"
+    before = data_csv.read_bytes()
+    with pytest.raises(ValueError, match=r"is the dataset's input .*data\.csv"):
+        convert(ds, data_csv, force=True)
+    assert cli(ds, data_csv, "--force") == 2
+    assert "refusing to overwrite it" in capsys.readouterr().err
+    assert data_csv.read_bytes() == before
+    assert sorted(p.name for p in ds.iterdir()) == ["data.csv"]  # no temporary left
+
+
+def test_force_never_overwrites_an_input_through_a_symlink(ds, tmp_path):
+    data_csv = ds / "data.csv"
+    before = data_csv.read_bytes()
+    link = tmp_path / "out.h5"
+    link.symlink_to(data_csv)
+    with pytest.raises(ValueError, match="is the dataset's input"):
+        convert(ds, link, force=True)
+    hard = tmp_path / "hard.h5"
+    os.link(data_csv, hard)  # the same file under another name
+    with pytest.raises(ValueError, match="is the dataset's input"):
+        convert(ds, hard, force=True)
+    (ds / "config.yaml").write_text("fov: 70\n")
+    with pytest.raises(ValueError, match=r"is the dataset's input .*config\.yaml"):
+        convert(ds, ds / "sub" / ".." / "config.yaml", force=True)
+    (ds / "clips").mkdir()
+    video = ds / "clips" / "a.mp4"
+    video.write_bytes(b"not really a video")
+    with pytest.raises(ValueError, match=r"would replace the dataset's \.mp4 file"):
+        convert(ds, video, force=True)
+    assert data_csv.read_bytes() == before and video.read_bytes() == b"not really a video"
+    # An HDF5 output inside the dataset directory stays allowed.
+    assert convert(ds, ds / "clips.h5")["output"] == str(ds / "clips.h5")
+
+
+# ---------------------------------------------------------------- item 13: config.yaml
+
+@pytest.mark.parametrize("text,match", [
+    ("- fov: 70\n", "expected a mapping .* at the top level, found a list"),
+    ("just words\n", "expected a mapping .* at the top level, found a str"),
+    ("camera_fov: wide\n", r"camera_fov must be a number of degrees in \(0, 180\), got 'wide'"),
+    ("camera_fov: 0\n", r"camera_fov must be a number of degrees in \(0, 180\), got 0"),
+    ("fov: 180\n", r"fov must be a number of degrees in \(0, 180\), got 180"),
+    ("fov: -30.5\n", r"got -30\.5"),
+    ("fov: .nan\n", r"got nan"),
+    ("fov: true\n", r"got True"),
+    ("fov: [70]\n", r"got \[70\]"),
+    ("fov: 70\n  bad: [\n", "not a readable YAML file"),
+])
+def test_malformed_config_yaml_is_a_clear_error(ds, tmp_path, capsys, text, match):
+    (ds / "config.yaml").write_text(text)
+    with pytest.raises(cv.BadDataset, match=match) as e:
+        convert(ds, tmp_path / "o.h5")
+    assert str(ds / "config.yaml") in str(e.value)
+    assert cli(ds, tmp_path / "o.h5") == 1  # bad data, not bad arguments
+    err = capsys.readouterr().err
+    assert "config.yaml" in err and "Traceback" not in err
+    assert not list(tmp_path.glob("*.h5")) and not list(tmp_path.glob(".o.h5*"))
+
+
+def test_good_config_yaml_still_gives_the_fov(ds, tmp_path):
+    (ds / "config.yaml").write_text("camera_fov: 72.5\nother: [1, 2]\n")
+    assert convert(ds, tmp_path / "o.h5")["settings"]["fov"] == 72.5
+    (ds / "config.yaml").write_text("")  # empty: no FOV, the default
+    assert convert(ds, tmp_path / "p.h5")["settings"]["fov_source"] == "default"
+    # An explicit fov= needs no config.yaml look-up at all.
+    (ds / "config.yaml").write_text("- not a mapping\n")
+    assert convert(ds, tmp_path / "q.h5", fov=60)["settings"]["fov"] == 60.0
+
+
+# ---------------------------------------------------------------- items 2, 9, 10: data.csv
+
+def rewrite_cell(path, column, line, value):
+    """Sets one cell of data.csv (`line` counts the header as line 1)."""
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    rows[line - 1][rows[0].index(column)] = value
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(rows)
+    path.write_text(buf.getvalue())
+
+
+@pytest.mark.parametrize("column,value,match", [
+    ("frame.idx", "-3", "expected a frame index from 0 to 10000000, found '-3'"),
+    ("frame.idx", "99999999999", "found '99999999999' \\(out of range: too large\\)"),
+    ("camera.width", "0", "expected a picture size in pixels from 1 to 16384, found '0'"),
+    ("camera.height", "-600", "expected a picture size in pixels from 1 to 16384, found '-600'"),
+    ("camera.width", "1000000", "found '1000000' \\(out of range: too large\\)"),
+    ("pedestrian.idx", "-1", "found '-1' \\(out of range: too small\\)"),
+])
+def test_out_of_range_integers_are_csv_errors_with_the_line(ds, tmp_path, capsys, column, value,
+                                                            match):
+    rewrite_cell(ds / "data.csv", column, 7, value)
+    with pytest.raises(bf.CsvParseError, match=f"data.csv, line 7, column '{column}': {match}"):
+        convert(ds, tmp_path / "o.h5")
+    assert cli(ds, tmp_path / "o.h5") == 1
+    assert "CsvParseError" in capsys.readouterr().err
+    assert not list(tmp_path.glob("*.h5")) and not list(tmp_path.glob(".o.h5*"))
+
+
+def test_cr_only_line_ends_are_refused(ds, tmp_path):
+    path = ds / "data.csv"
+    path.write_bytes(path.read_bytes().replace(b"\n", b"\r"))
+    with pytest.raises(bf.CsvParseError, match="line 1 \\(header\\): .*CR-only line ends"):
+        convert(ds, tmp_path / "o.h5")
+    with pytest.raises(bf.CsvParseError, match="CR-only"):
+        bf.read_csv(path)
+    assert cli(ds, tmp_path / "o.h5") == 1
