@@ -42,6 +42,7 @@ bench: install
 	$(PY) benchmarks/bench_convert_media.py
 	$(PY) benchmarks/bench_loader.py
 	$(PY) benchmarks/bench_synth.py
+	$(PY) benchmarks/bench_metrics.py
 
 clean:
 	rm -rf build dist *.egg-info demo-out
