@@ -6,8 +6,11 @@ It subclasses ``lightning.pytorch.LightningDataModule`` when Lightning is import
 """
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
 
+from . import cache as _cache
 from .datasets import DEFAULT_EVAL_SEED, SPLITS, TASKS, ClipDataset
 
 try:
@@ -23,42 +26,54 @@ except ImportError:  # pragma: no cover - depends on the environment
 __all__ = ["BSPDataModule", "LIGHTNING"]
 
 BENCHMARK = dict(clip_length=16, clip_offset=6, benchmark=True, balance=True)
+_NOT_OUTPUT = ("threads", "verify", "force", "progress", "strict")  # convert options only
 
 
-def _converter():
-    """``bsp_fast``'s convert function (module ``conversion``, formerly ``convert``)."""
+def _conversion():
     import importlib
 
-    try:
-        return importlib.import_module("bsp_fast.conversion").convert
-    except ModuleNotFoundError as exc:
-        if exc.name != "bsp_fast.conversion":
-            raise
-        return importlib.import_module("bsp_fast.convert").convert
+    return importlib.import_module("bsp_fast.conversion")
 
 
-def _default_h5(dataset_dir: Path, L: int, offset: int, benchmark: bool, balance: bool,
-                media: bool) -> Path:
-    tags = f"L{L}-o{offset}" + ("-benchmark" if benchmark else "")
-    tags += ("-balanced" if balance else "") + ("-media" if media else "")
-    return Path(dataset_dir) / f"bsp_fast-clips-{tags}.h5"
+def _plain_value(v) -> bool:
+    """Whether ``v`` can go into a checkpoint's hyper-parameters (YAML/JSON-like)."""
+    if v is None or isinstance(v, (bool, int, float, str)):
+        return True
+    if isinstance(v, (list, tuple)):
+        return all(_plain_value(x) for x in v)
+    if isinstance(v, dict):
+        return all(isinstance(k, str) and _plain_value(x) for k, x in v.items())
+    return False
+
+
+def _rank_zero() -> bool:
+    for name in ("RANK", "LOCAL_RANK", "SLURM_PROCID"):
+        if os.environ.get(name, "0") not in ("", "0"):
+            return False
+    return True
 
 
 class BSPDataModule(_Base):
     """Train/val/test loaders of one task over a converted HDF5 file.
 
-    Give ``h5_path`` (an existing file, or where to write one), ``dataset_dir`` (a CARLA-BSP
-    dataset converted on first use, to ``h5_path`` or by default to
-    ``<dataset_dir>/bsp_fast-clips-L<L>-o<offset>[-benchmark][-balanced][-media].h5``) or
-    both.
-    ``clip_length``/``clip_offset`` default as in :func:`bsp_fast.convert.convert` (30/L,
-    16/6 with ``benchmark``); for an existing file they are checked against its attributes.
-    ``balance`` balances the train split (in the converter, and in the dataset for files
-    converted without it). ``noise``/``mjp`` deform the 2D inputs (SPEC section 5), train
+    Give ``dataset_dir`` (a CARLA-BSP dataset, converted on first use into ``cache_dir``),
+    ``h5_path`` (an existing file, or where to write one) or both. The cached file is
+    keyed by every conversion option that changes the output and checked against data.csv
+    (size, and CRC-32 when it was modified), so changed options or a changed data.csv
+    convert again; the module says on stderr when it converts and when it reuses
+    (``verbose``). ``cache_dir`` defaults to ``<dataset_dir>/bsp_fast-cache`` (or
+    ``~/.cache/bsp_fast/...`` when the dataset is read-only). An explicit ``h5_path`` that
+    disagrees with the options or data.csv raises ``ValueError`` instead of being replaced.
+
+    ``clip_length``/``clip_offset`` default as in :func:`bsp_fast.convert` (30/L, 16/6 with
+    ``benchmark``). ``balance`` balances the train split (in the converter, and in the
+    dataset for files converted without it). ``noise``/``mjp`` deform the 2D inputs, train
     ``augment`` adds flips and rotations for the 2D tasks. ``convert_options`` go to
     :func:`bsp_fast.convert` (e.g. ``fov``, ``label``, ``seed``, ``crop_size``; ``media``
     defaults to True for ``pose_estimation`` only); other keywords of
-    :class:`ClipDataset` go in ``dataset_options``.
+    :class:`ClipDataset` go in ``dataset_options``. Every option is saved as a
+    hyper-parameter, so ``load_from_checkpoint`` rebuilds the same data (callables in
+    ``dataset_options``, e.g. transforms, cannot be saved: pass them again).
     """
 
     def __init__(self, dataset_dir=None, h5_path=None, task: str = "classification",
@@ -68,7 +83,7 @@ class BSPDataModule(_Base):
                  seed: int | None = None, eval_seed: int = DEFAULT_EVAL_SEED,
                  sampler_seed: int | None = None, block_size: int = 32, pin_memory: bool = False,
                  persistent_workers: bool | None = None, convert_options: dict | None = None,
-                 dataset_options: dict | None = None):
+                 dataset_options: dict | None = None, cache_dir=None, verbose: bool = True):
         super().__init__()
         if task not in TASKS:
             raise ValueError(f"task must be one of {list(TASKS)}, got {task!r}")
@@ -79,6 +94,9 @@ class BSPDataModule(_Base):
             raise ValueError(f"batch_size must be a positive integer, got {batch_size!r}")
         if not isinstance(num_workers, int) or num_workers < 0:
             raise ValueError(f"num_workers must be an integer >= 0, got {num_workers!r}")
+        bad = sorted(set(convert_options or {}) & set(_NOT_OUTPUT + ("dataset", "out_path")))
+        if bad:
+            raise ValueError(f"convert_options: {bad} are not conversion settings")
         self.dataset_dir = None if dataset_dir is None else Path(dataset_dir)
         self.task, self.benchmark_windows, self.balance = task, bool(benchmark), bool(balance)
         self._explicit = dict(clip_length=clip_length, clip_offset=clip_offset)
@@ -88,9 +106,9 @@ class BSPDataModule(_Base):
         self.convert_options = dict(convert_options or {})
         # media crops cost decoding time and space; only pose estimation reads them
         self.convert_options.setdefault("media", task == "pose_estimation")
-        self.h5_path = Path(h5_path) if h5_path is not None else _default_h5(
-            self.dataset_dir, L, self.clip_offset, self.benchmark_windows, self.balance,
-            bool(self.convert_options["media"]))
+        self._given_h5 = h5_path is not None
+        self._h5 = Path(h5_path) if h5_path is not None else None
+        self.cache_dir = Path(cache_dir) if cache_dir is not None else None
         self.noise, self.mjp, self.augment = noise, mjp, bool(augment)
         self.batch_size, self.num_workers = batch_size, num_workers
         self.seed, self.eval_seed, self.sampler_seed = seed, eval_seed, sampler_seed
@@ -98,32 +116,96 @@ class BSPDataModule(_Base):
         self.persistent_workers = (num_workers > 0 if persistent_workers is None
                                    else bool(persistent_workers))
         self.dataset_options = dict(dataset_options or {})
+        self.verbose = bool(verbose)
         self.datasets: dict = {}
         self.conversion_report = None
+        self.reused = None
         if LIGHTNING:
-            self.save_hyperparameters(ignore=["convert_options", "dataset_options"])
+            saved = {k: v for k, v in self.dataset_options.items() if _plain_value(v)}
+            self.save_hyperparameters(dict(
+                dataset_dir=None if dataset_dir is None else str(dataset_dir),
+                h5_path=None if h5_path is None else str(h5_path), task=task,
+                clip_length=clip_length, clip_offset=clip_offset, benchmark=bool(benchmark),
+                balance=bool(balance), noise=noise, mjp=mjp, batch_size=batch_size,
+                num_workers=num_workers, augment=bool(augment), seed=seed, eval_seed=eval_seed,
+                sampler_seed=sampler_seed, block_size=block_size, pin_memory=bool(pin_memory),
+                persistent_workers=persistent_workers, convert_options=dict(convert_options or {}),
+                dataset_options=saved, cache_dir=None if cache_dir is None else str(cache_dir),
+                verbose=bool(verbose)))
 
     @classmethod
     def benchmark(cls, dataset_dir=None, h5_path=None, task: str = "classification", **kwargs):
         """The report's crossing-classification setup: 16-frame clips every 6 frames from
         the time-to-event windows (video-level labels), balanced train split. Any keyword
-        of the constructor overrides."""
+        of the constructor overrides. (``bsp-convert --benchmark`` alone does not balance.)"""
         options = dict(BENCHMARK)
         options.update(kwargs)
         return cls(dataset_dir, h5_path, task, **options)
 
-    def prepare_data(self) -> None:
-        """Converts ``dataset_dir`` into ``h5_path`` through the C++ core when it is missing."""
-        if self.h5_path.exists():
-            return
-        if self.dataset_dir is None:
-            raise FileNotFoundError(f"{self.h5_path}: no such HDF5 file and no dataset_dir "
-                                    "to convert it from")
-        convert = _converter()
+    # ----------------------------------------------------------------- the converted file
+    def _say(self, message: str) -> None:
+        if self.verbose and _rank_zero():
+            print(f"bsp_fast.data: {message}", file=sys.stderr, flush=True)
+
+    def _convert_kwargs(self) -> dict:
         options = dict(clip_length=self.clip_length, clip_offset=self.clip_offset,
                        benchmark=self.benchmark_windows, balance=self.balance)
         options.update(self.convert_options)
-        self.conversion_report = convert(self.dataset_dir, self.h5_path, **options)
+        return options
+
+    def settings(self) -> dict:
+        """The resolved conversion settings this module asks for (needs ``dataset_dir``)."""
+        return _conversion().conversion_settings(self.dataset_dir, **self._convert_kwargs())
+
+    @property
+    def h5_path(self) -> Path:
+        """The converted file: ``h5_path`` if given, else its place in ``cache_dir``."""
+        if self._h5 is None:
+            folder = self.cache_dir or _cache.default_cache_dir(self.dataset_dir)
+            self._h5 = Path(folder) / _cache.cache_name(self.settings())
+        return self._h5
+
+    def _stale(self) -> str | None:
+        """Why the existing file cannot be used (None: it can, or there is no dataset to
+        compare it with)."""
+        if self.dataset_dir is None:
+            return None
+        _, csv = _conversion()._dataset_csv(self.dataset_dir)
+        return _cache.stale_reason(self.h5_path, self.settings(), csv)
+
+    def prepare_data(self) -> None:
+        """Converts ``dataset_dir`` into :attr:`h5_path` through the C++ core unless an
+        up-to-date conversion exists (then it says so and reuses it)."""
+        path = self.h5_path
+        if path.exists():
+            why = self._stale()
+            if why is None:
+                self.reused = True
+                if not self._given_h5 and self.dataset_dir is not None:
+                    _, csv = _conversion()._dataset_csv(self.dataset_dir)
+                    if csv.stat().st_mtime_ns > path.stat().st_mtime_ns:
+                        os.utime(path)  # data.csv was CRC-checked: not again next time
+                self._say(f"reusing {path} (same conversion options and data.csv)")
+                return
+            if self._given_h5:
+                raise ValueError(f"{path} is not the conversion this data module asks for: "
+                                 f"{why}; delete it, pass another h5_path, or leave h5_path "
+                                 "out to use the cache")
+            self._say(f"converting again: {path.name} is out of date ({why})")
+        elif self.dataset_dir is None:
+            raise FileNotFoundError(f"{path}: no such HDF5 file and no dataset_dir to "
+                                    "convert it from")
+        else:
+            self._say(f"converting {self.dataset_dir} -> {path} (first use of these options)")
+        conversion = _conversion()
+        self.conversion_report = conversion.convert(
+            self.dataset_dir, path, force=True,
+            progress=None if self.verbose and _rank_zero() else False,
+            **self._convert_kwargs())
+        self.reused = False
+        lines = conversion.format_report(self.conversion_report).splitlines()
+        for line in lines[:4] + [x for x in lines[4:] if x.startswith("WARNING")]:
+            self._say(line)
 
     def _check_file(self, ds: ClipDataset) -> None:
         a = ds.attrs
@@ -138,7 +220,7 @@ class BSPDataModule(_Base):
 
     def setup(self, stage: str | None = None) -> None:
         """Opens the splits (converting first if :meth:`prepare_data` has not run)."""
-        if not self.h5_path.exists():
+        if self.reused is None:
             self.prepare_data()
         want = {"fit": ("train", "val"), "validate": ("val",), "test": ("test",),
                 "predict": ("test",)}.get(stage, SPLITS)
