@@ -26,6 +26,8 @@ from .transforms import (
     rotate,
     visible_joints,
 )
+from .functional import denormalize_hips_neck_3d
+from .camera import camera_intrinsics, carla_to_opencv, focal_length, opencv_to_carla
 
 __all__ = [
     "ClipDataset", "FrameDataset", "BSPDataModule", "ContiguousBatchSampler", "IndexBatch",
@@ -35,7 +37,8 @@ __all__ = [
     "RandomFlipRotate", "HipsNeckNormalize", "HipsNeckDenormalize", "NormalizedPose",
     "normalize_hips_neck",
     "denormalize_hips_neck", "normalize_hips_neck_3d", "flip_horizontal", "flip_rotate", "rotate",
-    "joint_bbox", "visible_joints",
+    "joint_bbox", "visible_joints", "denormalize_hips_neck_3d", "camera_intrinsics",
+    "focal_length", "carla_to_opencv", "opencv_to_carla",
 ]
 
 

@@ -19,7 +19,8 @@ from .. import skeleton as _sk
 __all__ = [
     "HIPS", "NECK", "FALLBACK_SHIFT", "FALLBACK_SCALE", "NormalizedPose",
     "visible_joints", "joint_bbox", "normalize_hips_neck", "denormalize_hips_neck",
-    "normalize_hips_neck_3d", "flip_horizontal", "rotate", "flip_rotate",
+    "normalize_hips_neck_3d", "denormalize_hips_neck_3d", "flip_horizontal", "rotate",
+    "flip_rotate",
 ]
 
 HIPS, NECK = _sk.HIPS, _sk.NECK
@@ -189,6 +190,25 @@ def normalize_hips_neck_3d(points):
     scale[~(scale > 0)] = 1.0
     out = _affine(p, shift, (1 / scale).astype(np.float32), inverse=False)
     return back(out), back(shift), back(scale)
+
+
+def denormalize_hips_neck_3d(points, shift, scale):
+    """The inverse of :func:`normalize_hips_neck_3d`: ``points * scale + shift`` per frame.
+
+    ``points`` ``(..., J, 3)``; ``shift`` ``(..., 3)`` (the hips, metres) and ``scale``
+    ``(...)`` (the hips-neck length, metres) as returned with the normalised pose, e.g. a
+    lifting batch's ``target_shift`` and ``target_scale``. To score a prediction without
+    the ground truth's own scale, pass the reference skeleton's length
+    (``bsp_fast.skeleton.hips_neck_length``) instead.
+    """
+    p, back = _to_numpy(points)
+    _check_points(p, (3,))
+    shift = np.asarray(_to_numpy(shift)[0], np.float32)
+    scale = np.asarray(_to_numpy(scale)[0], np.float32)
+    if shift.shape != p.shape[:-2] + (3,) or scale.shape != p.shape[:-2]:
+        raise ValueError(f"shift must have shape {p.shape[:-2] + (3,)} and scale "
+                         f"{p.shape[:-2]} for points {p.shape}, got {shift.shape} and {scale.shape}")
+    return back(_affine(p, shift, scale, inverse=True))
 
 
 def flip_horizontal(points, width):
