@@ -205,7 +205,7 @@ def _finding(tab, f, values: dict, initial: dict) -> tuple:
         k = f["kind"]
         if k == "order":
             rs = f["rows"]
-            ok = all(sign * (v[b] - v[a]) > 0 for a, b in zip(rs, rs[1:]))
+            ok = all(sign * (v[a] - v[b]) > 0 for a, b in zip(rs, rs[1:]))
             text = rs[0] + " " + fm(v[rs[0]])
             for a, b in zip(rs, rs[1:]):
                 op = "<" if v[a] < v[b] else (">" if v[a] > v[b] else "=")

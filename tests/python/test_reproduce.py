@@ -1,0 +1,204 @@
+"""bsp-reproduce: the experiment tables load and resolve into valid bsp-train configs, the
+findings are marked from the numbers (hand-made results, both ways), and a smoke run of
+every table (1 epoch, 2 batches, tiny generated HDF5 files) prints the table and marks that
+agree with its own numbers."""
+from __future__ import annotations
+
+import json
+import re
+
+import h5py
+import pytest
+import torch
+
+from bsp_fast.data.testing import write_clip_file
+from bsp_fast.training import config as C
+from bsp_fast.training import reproduce as R
+
+TABLES = R.TABLES
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp("repro")
+    files = {"lifting": root / "l16.h5", "classification": root / "bench.h5",
+             "autoencoder": root / "l30.h5", "pose_estimation": root / "media.h5"}
+    write_clip_file(files["lifting"], clips=(24, 12, 12), clip_length=16, seed=1)
+    write_clip_file(files["autoencoder"], clips=(24, 12, 12), clip_length=30, seed=2)
+    write_clip_file(files["pose_estimation"], clips=(16, 8, 8), clip_length=4, seed=4,
+                    media=True)
+    write_clip_file(files["classification"], clips=(24, 12, 12), clip_length=16, seed=3)
+    with h5py.File(files["classification"], "a") as f:  # stands in for benchmark windows
+        f.attrs["benchmark"] = 1
+    return files
+
+
+# ---------------------------------------------------------------------- table files
+@pytest.mark.parametrize("table", TABLES)
+def test_tables_resolve_to_bsp_train_configs(table, tmp_path):
+    tab = R.load_table(table)
+    assert set(tab["budgets"]) == {"smoke", "quick", "full"}
+    assert tab["budgets"]["full"]["accelerator"] == "gpu"
+    assert tab["budgets"]["quick"]["accelerator"] == "cpu"
+    R.reproduce(tab, tmp_path / "data", "quick", tmp_path / "runs", dry_run=True, log=lambda s: 0)
+    cfgs = sorted((tmp_path / "runs" / f"{table}-quick" / "configs").glob("*.yaml"))
+    trained = [r["name"] for r in tab["rows"] if not r.get("initial_of")]
+    assert [p.stem for p in cfgs] == sorted(trained)
+    for path in cfgs:  # exactly what bsp-train --config reads
+        cfg = C.validate(C.defaults() | C.read_yaml(path))
+        assert cfg["task"] == tab["task"] and cfg["epochs"] == tab["budgets"]["quick"]["epochs"]
+        assert cfg["out"].endswith(f"{table}-quick/{path.stem}")
+
+
+def test_table_contents_match_the_report_setup():
+    cls = R.load_table("classification")
+    settings = {(r["options"]["model"], r["options"]["noise"], r["options"]["mjp"])
+                for r in cls["rows"]}
+    assert settings == {(m, n, p) for m in ("lstm", "pedestrian_graph")
+                        for n, p in ((0, 0), (5, 0.3), (5, 0.7187), (5, 0.9328))}
+    assert cls["common"]["benchmark"] and cls["common"]["balance"]
+    assert cls["budgets"]["full"]["epochs"] == 400
+    lift = R.load_table("lifting")
+    assert [r["options"]["model"] for r in lift["rows"]] == [
+        "poseformer", "lstm", "baseline_3d", "lstm_relative_rot"]
+    assert lift["rows"][0]["report"]["mpjpe_mm"] == 85.54
+    ae = R.load_table("autoencoder")
+    assert [(r["options"]["noise"], r["options"]["mjp"]) for r in ae["rows"]] == [
+        (0, 0), (5, 0.2944)]
+
+
+def test_bad_arguments(tmp_path, capsys):
+    with pytest.raises(ValueError, match="unknown table 'nope'; allowed: lifting"):
+        R.load_table("nope")
+    with pytest.raises(ValueError, match=r"unknown row\(s\) \['x'\].*allowed: poseformer"):
+        R.reproduce("lifting", tmp_path, "smoke", tmp_path, rows=["x"], dry_run=True)
+    assert R.main(["lifting", "--data", str(tmp_path), "--set", "epochs=-1", "--dry-run",
+                   "--out", str(tmp_path)]) == 2
+    assert "epochs must be >= 1" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------- findings
+def _res(values: dict, initial=None, metric="mpjpe_mm") -> dict:
+    return {k: {"metrics": {metric: v}, "initial": {metric: (initial or {}).get(k, v)}}
+            for k, v in values.items()}
+
+
+def test_lifting_order_is_read_from_the_numbers():
+    tab = R.load_table("lifting")
+    good = R.evaluate_findings(tab, _res({"poseformer": 80, "lstm": 90, "baseline_3d": 100,
+                                          "lstm_relative_rot": 120}))
+    assert good[0]["status"] == "reproduced"
+    assert good[0]["ours"] == ("poseformer 80.00 < lstm 90.00 < baseline_3d 100.00 < "
+                               "lstm_relative_rot 120.00")
+    assert good[0]["report"].startswith("poseformer 85.54 < lstm 109.36")
+    bad = R.evaluate_findings(tab, _res({"poseformer": 95, "lstm": 90, "baseline_3d": 100,
+                                         "lstm_relative_rot": 120}))
+    assert bad[0]["status"] == "not reproduced" and "poseformer 95.00 > lstm" in bad[0]["ours"]
+    some = R.evaluate_findings(tab, _res({"lstm": 90, "baseline_3d": 100}))
+    assert some[0]["status"] == "n/a" and some[0]["ours"] == "rows not run"
+    beats = R.evaluate_findings(tab, _res({"poseformer": 80, "lstm": 90, "baseline_3d": 100,
+                                           "lstm_relative_rot": 120},
+                                          initial={"poseformer": 200, "lstm": 200,
+                                                   "baseline_3d": 200, "lstm_relative_rot": 110}))
+    assert beats[2]["status"] == "not reproduced"  # relative_rot 120 is worse than 110
+
+
+def test_classification_findings_follow_the_numbers():
+    tab = R.load_table("classification")
+    f1 = {"lstm-perfect": 0.9, "lstm-mjp0.3": 0.85, "lstm-mjp0.7187": 0.8, "lstm-mjp0.9328": 0.7,
+          "graph-perfect": 0.8, "graph-mjp0.3": 0.7, "graph-mjp0.7187": 0.68,
+          "graph-mjp0.9328": 0.5}
+    init = {k: 0.52 for k in f1}
+    out = {f["text"].split(":")[0]: f for f in R.evaluate_findings(tab, _res(f1, init, "f1"))}
+    assert [f["status"] for f in out.values()] == ["reproduced"] * 6
+    assert out["sigma 5 + MJP 0.7187 costs PedestrianGraph F1 (report"]["ours"] == \
+        "0.800 -> 0.680 (loss 0.120)"
+    f1.update({"graph-perfect": 0.95, "graph-mjp0.9328": 0.9, "lstm-mjp0.9328": 0.6})
+    st = [f["status"] for f in R.evaluate_findings(tab, _res(f1, init, "f1"))]
+    # LSTM < graph on perfect data; graph at 0.9328 (0.9) far above the majority (0.52);
+    # LSTM loses more (0.3) than the graph (0.05) at 0.9328
+    assert st == ["not reproduced", "reproduced", "reproduced", "not reproduced",
+                  "not reproduced", "reproduced"]
+
+
+def test_autoencoder_and_pose_findings():
+    tab = R.load_table("autoencoder")
+    res = {"clean": {"metrics": {"pck_0.05": 0.99, "pckhn_0.1": 0.97}, "initial": {}},
+           "noisy": {"metrics": {"pck_0.05": 0.9, "pckhn_0.1": 0.8},
+                     "initial": {"pck_0.05": 0.6}}}
+    st = [f["status"] for f in R.evaluate_findings(tab, res)]
+    assert st == ["reproduced"] * 4
+    res["clean"]["metrics"]["pck_0.05"] = 0.85
+    st = [f["status"] for f in R.evaluate_findings(tab, res)]
+    assert st == ["not reproduced", "not reproduced", "reproduced", "reproduced"]
+    pose = R.load_table("pose_estimation")
+    res = {"pose_cnn": {"metrics": {"pck_0.05": 0.9}, "initial": {"pck_0.05": 0.5}},
+           "average_skeleton": {"metrics": {"pck_0.05": 0.5}, "initial": {"pck_0.05": 0.5}}}
+    assert [f["status"] for f in R.evaluate_findings(pose, res)] == [
+        "not reproduced", "reproduced", "reproduced"]
+    res["pose_cnn"]["metrics"]["pck_0.05"] = 0.53
+    assert [f["status"] for f in R.evaluate_findings(pose, res)] == [
+        "reproduced", "not reproduced", "not reproduced"]
+
+
+# ---------------------------------------------------------------------- smoke runs
+SMOKE_ROWS = {"lifting": "poseformer,lstm_relative_rot",
+              "classification": "lstm-perfect,graph-perfect",
+              "autoencoder": None, "pose_estimation": None}
+
+
+@pytest.mark.parametrize("table", TABLES)
+def test_smoke_run_prints_table_and_consistent_marks(table, data, tmp_path, capsys):
+    argv = [table, "--data", str(data[table]), "--budget", "smoke", "--out", str(tmp_path)]
+    if SMOKE_ROWS[table]:
+        argv += ["--rows", SMOKE_ROWS[table]]
+    if table == "pose_estimation":
+        argv += ["--set", "crop_size=32", "--set", "hp={width: 4, hidden: 16}"]
+    assert R.main(argv) == 0
+    text = capsys.readouterr().out
+    tab = R.load_table(table)
+    base = tmp_path / f"{table}-smoke"
+    saved = json.loads((base / "results.json").read_text())
+    assert (base / "results.md").read_text() in text
+    lines = [ln for ln in text.splitlines() if ln.startswith("| ")]
+    header = [c.strip() for c in lines[0].strip("|").split("|")]
+    labels = [tab["metrics"][m]["label"] for m in tab["metrics"]]
+    assert header[:2] == ["row", "model"] and header[-1] == "epochs (best/run)"
+    assert all(label in header for label in labels)
+    ran = list(saved["results"])
+    expect = SMOKE_ROWS[table].split(",") if SMOKE_ROWS[table] else [r["name"] for r in tab["rows"]]
+    assert sorted(ran) == sorted(expect)
+    for name in ran:  # the printed numbers are the runs' metrics.json
+        row = next(ln for ln in lines if ln.startswith(f"| {name} |"))
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        m = next(iter(tab["metrics"]))
+        col = header.index(tab["metrics"][m]["label"])
+        assert cells[col] == R._fmt(tab, m, saved["results"][name]["metrics"][m])
+    marks = {f["text"]: f["status"] for f in saved["findings"]}
+    assert marks == {f["text"]: f["status"] for f in R.evaluate_findings(tab, saved["results"])}
+    for f in tab["findings"]:  # every finding is printed, with the status the numbers give
+        assert re.search("^\\| " + re.escape(f["text"]) + r" \|.*\| " + re.escape(marks[f["text"]])
+                         + r" \|$", text, re.M)
+    if table == "lifting":  # only two rows ran: the 4-model order cannot be judged
+        assert marks[tab["findings"][0]["text"]] == "n/a"
+        v = {r: saved["results"][r]["metrics"]["mpjpe_mm"] for r in ran}
+        assert all(isinstance(x, float) and x > 0 for x in v.values())
+    if table == "classification":
+        v = {r: saved["results"][r]["metrics"]["f1"] for r in ran}
+        want = "reproduced" if v["lstm-perfect"] >= v["graph-perfect"] else "not reproduced"
+        assert marks[tab["findings"][0]["text"]] == want
+    if table == "pose_estimation":
+        v = {r: saved["results"][r]["metrics"]["pck_0.05"] for r in ran}
+        want = "reproduced" if v["pose_cnn"] > v["average_skeleton"] + 0.05 else "not reproduced"
+        assert marks[tab["findings"][1]["text"]] == want
+    # a second call reuses the finished rows (no training), same numbers
+    assert R.main(argv) == 0
+    assert "reusing" in capsys.readouterr().out
