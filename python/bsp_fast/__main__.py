@@ -6,6 +6,7 @@
     python -m bsp_fast train ...        same as bsp-train
     python -m bsp_fast eval ...         same as bsp-eval
     python -m bsp_fast predict ...      same as bsp-predict
+    python -m bsp_fast reproduce ...    same as bsp-reproduce
     python -m bsp_fast preview ...      same as bsp-preview
     python -m bsp_fast check ...        same as bsp-check
 """
@@ -32,7 +33,8 @@ def main(argv=None) -> int:
         from bsp_fast.synth.cli import main as synth_main
 
         return synth_main(argv[1:])
-    training = {"train": "train", "eval": "evaluate", "predict": "predict"}
+    training = {"train": "train", "eval": "evaluate", "predict": "predict",
+                "reproduce": "reproduce"}
     if argv and argv[0] in training:
         import importlib
 
