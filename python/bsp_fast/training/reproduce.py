@@ -191,6 +191,7 @@ def _finding(tab, f, values: dict, initial: dict) -> tuple:
     (source ``ours`` or ``report``); ``initial[row]`` the trivial baseline's (ours only)."""
     metric, sign = f["metric"], _better(tab, f["metric"])
     fm = lambda v: _fmt(tab, metric, v)  # noqa: E731
+    pp = " p.p." if tab["metrics"][metric].get("format") == "pct" else ""
     out = {}
     for src in ("ours", "report"):
         v = values[src]
@@ -216,12 +217,12 @@ def _finding(tab, f, values: dict, initial: dict) -> tuple:
         elif k == "drop":
             drop = sign * (v[f["base"]] - v[f["other"]])
             ok = drop > 0
-            text = f"{fm(v[f['base']])} -> {fm(v[f['other']])} (loss {fm(drop)})"
+            text = f"{fm(v[f['base']])} -> {fm(v[f['other']])} (loss {fm(drop)}{pp})"
         elif k == "robuster":
             la = sign * (v[f["a"][0]] - v[f["a"][1]])
             lb = sign * (v[f["b"][0]] - v[f["b"][1]])
             ok = la < lb
-            text = f"loss {fm(la)} vs {fm(lb)}"
+            text = f"loss {fm(la)}{pp} vs {fm(lb)}{pp}"
         elif k == "at_least":
             ok = v[f["row"]] >= f["value"]
             text = f"{f['row']} {fm(v[f['row']])} (threshold {fm(f['value'])})"
@@ -234,7 +235,7 @@ def _finding(tab, f, values: dict, initial: dict) -> tuple:
             text = "; ".join(f"{r} {fm(v[r])} vs {fm(initial[r])}" for r in f["rows"])
         out[src] = (text, ok)
     if f["kind"] == "drop" and f.get("report") is not None and out["report"][1] is None:
-        out["report"] = (f"loss about {fm(f['report'])}", True)
+        out["report"] = (f"loss about {fm(f['report'])}{pp}", True)
     ours, ok = out["ours"]
     report = out["report"][0] or f.get("report_text", "stated in the report")
     status = NA if ok is None else (YES if ok else NO)
