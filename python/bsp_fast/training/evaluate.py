@@ -74,7 +74,8 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
     ``metrics.json``."""
     if split not in SPLIT_STAGES:
         raise ValueError(f"split must be one of {list(SPLIT_STAGES)}, got {split!r}")
-    from .train import make_datamodule, make_trainer, prepare_data, resolve_precision
+    from .train import (check_precision, make_datamodule, make_trainer, prepare_data,
+                        resolve_precision)
 
     module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size, workers=workers,
                                      accelerator=accelerator, noise=noise, mjp=mjp,
@@ -82,6 +83,10 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
     dm = make_datamodule(cfg, h5)
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
     precision = resolve_precision(cfg["precision"], cfg["accelerator"])
+    try:
+        check_precision(module, precision, cfg["accelerator"])
+    except C.ConfigError:  # e.g. a bf16 GPU run of an LSTM evaluated on a CPU
+        precision = "32"
     trainer = make_trainer(cfg, None, precision, fit=False)
     if split == "test":
         trainer.test(module, datamodule=dm, verbose=False)

@@ -140,6 +140,27 @@ def resolve_precision(precision: str, accelerator: str) -> str:
     return "32"
 
 
+def check_precision(module, precision: str, accelerator: str) -> None:
+    """bf16 on a CPU: oneDNN has no bf16 LSTM kernel without AVX512-BF16/AMX (measured:
+    "could not create a primitive descriptor for the LSTM forward propagation primitive"),
+    so an LSTM model is probed once and refused with a clear message instead."""
+    import torch
+
+    on_cpu = accelerator == "cpu" or not torch.cuda.is_available()
+    if not (precision.startswith("bf16") and on_cpu):
+        return
+    if not any(isinstance(m, torch.nn.LSTM) for m in module.modules()):
+        return
+    probe = torch.nn.LSTM(4, 4, batch_first=True)
+    try:
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            probe(torch.zeros(1, 2, 4))
+    except RuntimeError:
+        raise C.ConfigError(f"--precision {precision}: this CPU has no bf16 LSTM kernel "
+                            f"(oneDNN) and model {module.hparams['model']!r} uses an LSTM; "
+                            "use --precision 32") from None
+
+
 def _extra_logger(kind: str, tmp: Path, name: str):
     import importlib.util
 
@@ -223,6 +244,7 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
                                            config=cfg)
     except (ValueError, TypeError) as exc:
         raise C.ConfigError(f"model {cfg['model']!r}: {exc}") from None
+    check_precision(module, precision, cfg["accelerator"])
     ckpt_path = None
     if resume is not None:
         ckpt_path = resume["ckpt"]
