@@ -332,6 +332,76 @@ TEST_CASE("read_pose_csv errors name the file, line, column, expected and found"
   }
 }
 
+TEST_CASE("read_pose_csv refuses negative or absurd integers, naming the line (issue 15)") {
+  TempDir tmp;
+  const auto with = [&](int col, const std::string& cell) {
+    std::vector<std::string> cells = row_cells(2);
+    cells[static_cast<std::size_t>(col)] = cell;
+    return header_line() + join(row_cells(1)) + join(cells);
+  };
+  SUBCASE("frame.idx") {
+    std::string p = tmp.write("neg.csv", with(11, "-5"));
+    CHECK(error_of(p) == p + ", line 3, column 'frame.idx': expected a frame index from 0 to "
+                             "10000000, found '-5' (out of range: too small)");
+    p = tmp.write("big.csv", with(11, "9223372036854775807"));
+    CHECK(error_of(p) == p + ", line 3, column 'frame.idx': expected a frame index from 0 to "
+                             "10000000, found '9223372036854775807' (out of range: too large)");
+    p = tmp.write("ok.csv", with(11, "10000000"));
+    CHECK(read_pose_csv(p).frame_idx[1] == 10000000);
+  }
+  SUBCASE("camera.width and camera.height (item 10)") {
+    for (const char* bad : {"0", "-1600", "100000"}) {
+      std::string p = tmp.write("w.csv", with(4, bad));
+      std::string e = error_of(p);
+      INFO(e);
+      CHECK(e.find(p + ", line 3, column 'camera.width': expected a picture size in pixels "
+                       "from 1 to 16384, found '" + std::string(bad) + "'") == 0);
+      p = tmp.write("h.csv", with(5, bad));
+      e = error_of(p);
+      CHECK(e.find(p + ", line 3, column 'camera.height': expected a picture size") == 0);
+    }
+  }
+  SUBCASE("the other integer columns") {
+    for (int col : {2, 6, 14}) {
+      const std::string p = tmp.write("o.csv", with(col, "-1"));
+      const std::string e = error_of(p);
+      INFO(e);
+      CHECK(e.find(p + ", line 3, column '" + kPoseCsvColumns[static_cast<std::size_t>(col)] +
+                   "': expected ") == 0);
+      CHECK(e.find("found '-1' (out of range: too small)") != std::string::npos);
+    }
+  }
+  SUBCASE("the range holds for every thread count") {
+    std::string text = header_line();
+    for (int f = 0; f < 500; ++f) text += join(row_cells(f));
+    std::vector<std::string> cells = row_cells(500);
+    cells[11] = "-3";
+    text += join(cells);
+    const std::string p = tmp.write("many.csv", text);
+    for (int threads : {1, 3}) {
+      CsvReadOptions opt;
+      opt.threads = threads;
+      CHECK(error_of(p, opt).find(p + ", line 502, column 'frame.idx'") == 0);
+    }
+  }
+}
+
+TEST_CASE("read_pose_csv refuses CR-only line ends instead of reading zero rows (issue 15)") {
+  TempDir tmp;
+  const std::string text = join(std::vector<std::string>(kPoseCsvColumns.begin(),
+                                                         kPoseCsvColumns.end()), "\r") +
+                           join(row_cells(1), "\r") + join(row_cells(2), "\r");
+  const std::string p = tmp.write("cr.csv", text);
+  const std::string e = error_of(p);
+  INFO(e);
+  CHECK(e.find(p + ", line 1 (header): found a carriage return without a line feed at byte " +
+               std::to_string(header_line().size() - 1) + ": CR-only line ends") == 0);
+  // CRLF files still read.
+  const std::string q = tmp.write("crlf.csv", join(std::vector<std::string>(
+      kPoseCsvColumns.begin(), kPoseCsvColumns.end()), "\r\n") + join(row_cells(1), "\r\n"));
+  CHECK(read_pose_csv(q).rows == 1);
+}
+
 TEST_CASE("read_pose_csv reports its progress in rows") {
   TempDir tmp;
   std::string text = header_line();

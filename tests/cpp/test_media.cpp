@@ -1,6 +1,8 @@
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -179,4 +181,140 @@ TEST_CASE("video: write -> read round trip keeps count, size and picture") {
                        doctest::Contains("frame 20 requested but file has 20 frames"),
                        VideoDecodeError);
   fs::remove(path);
+}
+
+// ---------------------------------------------------------------- hostile files (issue 15)
+namespace {
+
+std::vector<std::uint8_t> file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void put_bytes(const std::string& path, const std::vector<std::uint8_t>& b) {
+  std::ofstream(path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+}
+
+// One PNG chunk: length, type, data, CRC.
+std::vector<std::uint8_t> chunk(const char* type, const std::vector<std::uint8_t>& data) {
+  std::vector<std::uint8_t> c(12 + data.size());
+  png::put_u32(c.data(), static_cast<std::uint32_t>(data.size()));
+  std::memcpy(c.data() + 4, type, 4);
+  std::copy(data.begin(), data.end(), c.begin() + 8);
+  png::put_u32(c.data() + 8 + data.size(),
+               png::chunk_crc(c.data() + 4, c.data() + 8, data.size()));
+  return c;
+}
+
+std::vector<std::uint8_t> ihdr(std::uint32_t w, std::uint32_t h, std::uint8_t colour_type = 3) {
+  std::vector<std::uint8_t> d(13, 0);
+  png::put_u32(d.data(), w);
+  png::put_u32(d.data() + 4, h);
+  d[8] = 8, d[9] = colour_type;
+  return chunk("IHDR", d);
+}
+
+// Offset of the first chunk of `type` at or after `from` (chunk start, not its type).
+std::size_t find_chunk(const std::vector<std::uint8_t>& b, const char* type, std::size_t from = 8) {
+  for (std::size_t pos = 8; pos + 12 <= b.size(); pos += 12 + png::get_u32(b.data() + pos))
+    if (pos >= from && std::memcmp(b.data() + pos + 4, type, 4) == 0) return pos;
+  return std::string::npos;
+}
+
+// Recomputes the CRC of the chunk at `pos` after its data was edited.
+void fix_crc(std::vector<std::uint8_t>& b, std::size_t pos) {
+  const std::uint32_t len = png::get_u32(b.data() + pos);
+  png::put_u32(b.data() + pos + 8 + len, png::chunk_crc(b.data() + pos + 4, b.data() + pos + 8, len));
+}
+
+std::string small_apng(int w, int h, int n) {
+  const std::string path = temp_file("hostile.apng");
+  ApngWriter wr(path, w, h, cityscapes_palette());
+  for (int k = 0; k < n; ++k) wr.write(tags(k, w, h).data());
+  wr.close();
+  return path;
+}
+
+}  // namespace
+
+TEST_CASE("apng: a second IHDR is refused at open, naming the file and the chunk") {
+  const int w = 16, h = 10;
+  const std::string path = small_apng(w, h, 4);
+  std::vector<std::uint8_t> b = file_bytes(path);
+  // A valid, larger IHDR just before frame 3's fcTL: frames 0..2 were sized for 16x10.
+  std::size_t at = find_chunk(b, "fcTL");
+  for (int k = 0; k < 3; ++k) at = find_chunk(b, "fcTL", at + 1);
+  REQUIRE(at != std::string::npos);
+  const std::vector<std::uint8_t> big = ihdr(64, 64);
+  b.insert(b.begin() + static_cast<std::ptrdiff_t>(at), big.begin(), big.end());
+  put_bytes(path, b);
+  CHECK_THROWS_WITH_AS(ApngReader{path},
+                       doctest::Contains((path + ": frame 2: second IHDR chunk at byte " +
+                                          std::to_string(at)).c_str()),
+                       ApngError);
+  // The same IHDR right after the first one (before any frame) is refused too.
+  b = file_bytes(small_apng(w, h, 2));
+  const std::vector<std::uint8_t> same = ihdr(w, h);
+  b.insert(b.begin() + 33, same.begin(), same.end());
+  put_bytes(path, b);
+  CHECK_THROWS_WITH_AS(ApngReader{path}, doctest::Contains("second IHDR chunk at byte 33"),
+                       ApngError);
+  fs::remove(path);
+}
+
+TEST_CASE("apng: an fcTL rectangle outside the canvas is an error naming the frame") {
+  const int w = 16, h = 10;
+  const std::string path = small_apng(w, h, 4);
+  std::vector<std::uint8_t> b = file_bytes(path);
+  std::size_t at = find_chunk(b, "fcTL");
+  for (int k = 0; k < 2; ++k) at = find_chunk(b, "fcTL", at + 1);
+  png::put_u32(b.data() + at + 8 + 12, 15);  // x_offset 15: one column left, any width overflows
+  png::put_u32(b.data() + at + 8 + 4, 4);
+  fix_crc(b, at);
+  put_bytes(path, b);
+  ApngReader rd(path);
+  std::vector<std::uint8_t> out(static_cast<std::size_t>(w) * h * 3);
+  CHECK_NOTHROW(rd.read({0, 1}, out.data()));
+  CHECK_THROWS_WITH_AS(rd.read({2}, out.data()),
+                       doctest::Contains((path + ": frame 2: fcTL region 4x").c_str()), ApngError);
+  CHECK(rd.damage().find("frame 2: fcTL region 4x") == 0);
+  fs::remove(path);
+}
+
+TEST_CASE("apng: decompression bombs are refused from the header, before any allocation") {
+  const std::string path = temp_file("bomb.png");
+  std::vector<std::uint8_t> b(png::kSignature, png::kSignature + 8);
+  for (const auto& c : {ihdr(30000, 30000), chunk("PLTE", std::vector<std::uint8_t>(768, 0)),
+                        chunk("IDAT", {0x78, 0x9c, 0x03, 0x00}), chunk("IEND", {})})
+    b.insert(b.end(), c.begin(), c.end());
+  put_bytes(path, b);
+  CHECK_THROWS_WITH_AS(ApngReader{path},
+                       doctest::Contains((path + ": image size 30000x30000 exceeds the limit").c_str()),
+                       ApngError);
+  // Within the limits the header alone allocates nothing: width() and height() can be
+  // checked against what the caller expects before the first read() takes the canvas.
+  b = std::vector<std::uint8_t>(png::kSignature, png::kSignature + 8);
+  for (const auto& c : {ihdr(4096, 4096), chunk("PLTE", std::vector<std::uint8_t>(768, 0)),
+                        chunk("IDAT", {0x78, 0x9c, 0x03, 0x00}), chunk("IEND", {})})
+    b.insert(b.end(), c.begin(), c.end());
+  put_bytes(path, b);
+  ApngReader rd(path);
+  CHECK(rd.width() == 4096);
+  std::vector<std::uint8_t> one(std::size_t{4096} * 4096);
+  CHECK_THROWS_WITH_AS(rd.read({0}, one.data()), doctest::Contains((path + ": frame 0: ").c_str()),
+                       ApngError);
+  // An acTL frame count no file could hold (delays() would size a vector by it).
+  const std::string anim = small_apng(16, 10, 3);
+  b = file_bytes(anim);
+  const std::size_t actl = find_chunk(b, "acTL");
+  png::put_u32(b.data() + actl + 8, 20'000'000);
+  fix_crc(b, actl);
+  b[find_chunk(b, "fdAT") + 9] ^= 0x10;  // damage: the open goes on past the frame count check
+  put_bytes(anim, b);
+  CHECK_THROWS_WITH_AS(ApngReader{anim},
+                       doctest::Contains("acTL declares 20000000 frames, more than the limit"),
+                       ApngError);
+  fs::remove(path);
+  fs::remove(anim);
 }

@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
+#include <memory>
 #include <map>
 #include <thread>
 
@@ -39,7 +41,18 @@ std::string resolve_path(const PoseTable& t, std::size_t row, const char* column
     if (end == rel.size()) break;
     start = end + 1;
   }
-  return root + "/" + rel;
+  // Symlinks may not lead out either: the real path must stay under the root's real path.
+  const std::string path = root + "/" + rel;
+  std::unique_ptr<char, void (*)(void*)> real(::realpath(path.c_str(), nullptr), &std::free);
+  std::unique_ptr<char, void (*)(void*)> real_root(::realpath(root.c_str(), nullptr), &std::free);
+  if (real && real_root) {
+    const std::string r(real.get()), rr(real_root.get());
+    if (r.compare(0, rr.size(), rr) != 0 || (r.size() > rr.size() && r[rr.size()] != '/' &&
+                                             rr != "/"))
+      throw Error(where + "media path \"" + rel + "\" resolves to " + r +
+                  ", outside the dataset root " + rr + " (a symlink leading out: refused, not opened)");
+  }
+  return path;
 }
 
 // Every row of a recording must name the same file in `col`.
@@ -85,6 +98,9 @@ void check_recording(const PoseTable& t, const std::size_t* rows, std::size_t n,
   const auto map = seg.video_to_apng_frames(last + 1, video.fps());
   for (std::size_t i = 0; i < n; ++i) {
     const std::int64_t k = t.frame_idx[rows[i]];
+    if (map[static_cast<std::size_t>(k)] < 0 && !seg.damage().empty())
+      throw ApngError(f.segmentation + ": video frame " + std::to_string(k) +
+                      " cannot be decoded: the file is damaged at " + seg.damage());
     if (map[static_cast<std::size_t>(k)] < 0)
       throw ApngError(f.segmentation + ": video frame " + std::to_string(k) +
                       " is shown after the animation's end (" +

@@ -24,6 +24,24 @@ namespace bsp::csv_detail {
 inline constexpr int kCrossingColumn = 20;
 inline constexpr int kKeyColumns[4] = {0, 2, 6, 11};  // id, camera.idx, pedestrian.idx, frame.idx
 
+// The values an integer column accepts: indices are never negative, frame indices and
+// picture sizes stay below what any recording could have (a larger value is hostile or
+// corrupt input and would otherwise size an allocation or index the media plan).
+struct IntRange {
+  std::int64_t lo, hi;
+  const char* what;  // for error messages
+};
+inline constexpr std::int64_t kMaxFrameIdx = 10'000'000;  // over 90 hours at 30 fps
+inline constexpr std::int64_t kMaxPictureSide = 16384;
+inline constexpr IntRange int_range(int col) {
+  switch (col) {
+    case 4: case 5: return {1, kMaxPictureSide, "a picture size in pixels"};
+    case 11: return {0, kMaxFrameIdx, "a frame index"};
+    case 14: return {0, std::int64_t{1} << 40, "a world frame number"};
+    default: return {0, std::numeric_limits<std::int32_t>::max(), "an index"};
+  }
+}
+
 // "a, b, ..., <alias>": the names a column selection accepts, for error messages.
 std::string allowed_columns();
 

@@ -133,8 +133,7 @@ std::string explain_list(std::string_view content, const CsvColumnSpec& spec) {
   return {};
 }
 
-bool is_int(std::string_view s) {
-  std::int64_t v;
+bool is_int(std::string_view s, std::int64_t& v) {
   const char* p = s.data();
   const char* end = p + s.size();
   return !s.empty() && scan_int_cell(p, end, &v) && p == end;
@@ -165,7 +164,16 @@ std::string explain_cell(std::string_view text, int col) {
     case CsvKind::string: return {};
     case CsvKind::integer:
       if (text.empty()) return "expected an integer, found an empty cell";
-      return is_int(text) ? std::string() : "expected an integer, found " + snippet(text);
+      {
+        std::int64_t v = 0;
+        if (!is_int(text, v)) return "expected an integer, found " + snippet(text);
+        const IntRange r = int_range(col);
+        if (v < r.lo || v > r.hi)
+          return std::string("expected ") + r.what + " from " + std::to_string(r.lo) + " to " +
+                 std::to_string(r.hi) + ", found " + snippet(text) +
+                 (v < r.lo ? " (out of range: too small)" : " (out of range: too large)");
+        return {};
+      }
     case CsvKind::boolean:
       return is_bool(text) ? std::string()
                            : "expected True, False or an empty cell, found " + snippet(text);

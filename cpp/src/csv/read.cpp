@@ -252,6 +252,12 @@ PoseTable read_pose_csv(const std::string& path, const CsvReadOptions& opt) {
   PoseTable t;
   t.path = path;
   const csv_detail::Lines lines = index_lines(file.data(), file.size(), threads);
+  // A '\r' left inside the first line means CR-only line ends (classic Mac): the whole
+  // file would read as a header and no rows. Refused rather than converted to nothing.
+  if (const std::size_t cr = lines.header.find('\r'); cr != std::string_view::npos)
+    throw CsvParseError(path + ", line 1 (header): found a carriage return without a line "
+                        "feed at byte " + std::to_string(cr) + ": CR-only line ends are not "
+                        "supported (expected '\\n' or '\\r\\n' line ends)");
   const std::vector<std::string> names = split_header(lines.header, path);
   const std::vector<int> cols = map_header(names, wanted, opt, t);
   t.rows = lines.begin.size();

@@ -28,6 +28,7 @@ struct Target {
   std::int32_t* codes = nullptr;
   StringColumn* str = nullptr;
   int dict = -1;
+  std::int64_t lo = 0, hi = 0;  // integer columns: the accepted range
 };
 
 // First-seen dictionary of one string column within one block of rows. Keys view the
@@ -67,7 +68,8 @@ inline bool parse_cell(const Target& t, std::size_t row, const char*& p, const c
   bool escaped = false;
   switch (t.action) {
     case Action::floats: return scan_list_cell(p, end, *t.spec, t.f + row * t.numbers);
-    case Action::integer: return scan_int_cell(p, end, t.i + row);
+    case Action::integer:
+      return scan_int_cell(p, end, t.i + row) && t.i[row] >= t.lo && t.i[row] <= t.hi;
     case Action::boolean: return scan_bool_cell(p, end, t.b + row, t.v + row);
     case Action::string:
       if (!scan_string_cell(p, end, raw, escaped)) return false;
@@ -122,6 +124,7 @@ std::vector<Target> make_targets(const std::vector<int>& cols, PoseTable& t, int
       case CsvKind::integer:
         r.ints->resize(t.rows);
         g.action = Action::integer, g.i = r.ints->data();
+        g.lo = int_range(cols[k]).lo, g.hi = int_range(cols[k]).hi;
         break;
       case CsvKind::boolean:
         r.bools->resize(t.rows);

@@ -277,7 +277,8 @@ ApngReader::ApngReader(std::string path) : impl_(std::make_unique<Impl>()) {
   m.inflater = png::make_decompressor();
   m.ahead_inflater = png::make_decompressor();
   if (!m.inflater || !m.ahead_inflater) m.fail("cannot allocate a libdeflate decompressor");
-  m.canvas.assign(static_cast<std::size_t>(m.width) * m.height * m.channels, 0);
+  // The canvas is allocated by the first read(), so that a caller can check width() and
+  // height() against what it expects before any frame-sized memory is taken.
 }
 
 ApngReader::~ApngReader() = default;
@@ -303,6 +304,11 @@ std::vector<std::uint8_t> ApngReader::dispose_ops() const {
   return d;
 }
 
+std::string ApngReader::damage() const {
+  if (impl_->bad_frame < 0) return {};
+  return "frame " + std::to_string(impl_->bad_frame) + ": " + impl_->bad_reason;
+}
+
 std::vector<std::uint8_t> ApngReader::blend_ops() const {
   std::vector<std::uint8_t> d;
   for (const FrameInfo& f : impl_->frames) d.push_back(f.blend);
@@ -326,8 +332,9 @@ void ApngReader::read(const std::vector<std::int64_t>& indices, std::uint8_t* ou
   std::iota(order.begin(), order.end(), std::size_t{0});
   std::stable_sort(order.begin(), order.end(),
                    [&](std::size_t a, std::size_t b) { return indices[a] < indices[b]; });
-  const std::size_t frame_bytes = m.canvas.size();
   std::lock_guard<std::mutex> lock(m.mutex);
+  if (m.canvas.empty()) m.canvas.assign(std::size_t{m.width} * m.height * m.channels, 0);
+  const std::size_t frame_bytes = m.canvas.size();
   // Decoding ahead pays for its thread once a request spans a few frames.
   if (order.size() > 1 && indices[order.back()] - indices[order.front()] >= 4)
     return m.read_sequence(indices, order, out);

@@ -50,6 +50,11 @@ struct FrameInfo {
 };
 
 // What the chunk walk learns about a file.
+// Limits of the reader: larger headers are refused before anything is allocated.
+inline constexpr std::uint32_t kMaxSide = 16384;
+inline constexpr std::uint64_t kMaxPixels = std::uint64_t{1} << 26;  // 8192 x 8192
+inline constexpr std::int64_t kMaxFrames = 10'000'000;
+
 struct FileIndex {
   std::uint32_t width = 0, height = 0;
   int colour_type = 0;

@@ -58,8 +58,14 @@ void Indexer::read_ihdr(const std::uint8_t* d, std::uint32_t len) {
   height = get_u32(d + 4);
   const int depth = d[8];
   colour_type = d[9];
-  if (width == 0 || height == 0 || width > (1u << 24) || height > (1u << 24))
+  if (width == 0 || height == 0)
     fail("invalid image size " + std::to_string(width) + "x" + std::to_string(height));
+  // Decompression bombs: a few bytes of header must not size a gigabyte canvas.
+  if (width > kMaxSide || height > kMaxSide ||
+      std::uint64_t{width} * height > kMaxPixels)
+    fail("image size " + std::to_string(width) + "x" + std::to_string(height) +
+         " exceeds the limit (" + std::to_string(kMaxSide) + " pixels a side, " +
+         std::to_string(kMaxPixels) + " pixels in all)");
   if (channels_of(colour_type) == 0)
     fail("unsupported colour type " + std::to_string(colour_type));
   if (depth != 8)
@@ -116,6 +122,10 @@ bool Indexer::handle_chunk(const std::uint8_t* type, const std::uint8_t* d,
                                     bool& seen_idat) {
   auto is = [&](const char* t) { return std::memcmp(type, t, 4) == 0; };
   if (is("IHDR")) {
+    // A second IHDR would change the canvas under frames already sized for the first one.
+    if (width != 0)
+      fail("frame " + std::to_string(frame_of_next_data()) + ": second IHDR chunk at byte " +
+           std::to_string(at - 8) + " (a PNG has exactly one, first)");
     read_ihdr(d, len);
   } else if (is("PLTE")) {
     if (len % 3 || len == 0 || len > 768) fail("PLTE has " + std::to_string(len) + " bytes");
@@ -126,6 +136,9 @@ bool Indexer::handle_chunk(const std::uint8_t* type, const std::uint8_t* d,
     if (len != 8) fail("acTL has " + std::to_string(len) + " bytes, expected 8");
     declared = get_u32(d);
     if (declared == 0) fail("acTL declares 0 frames");
+    if (declared > kMaxFrames)
+      fail("acTL declares " + std::to_string(declared) + " frames, more than the limit of " +
+           std::to_string(kMaxFrames));
   } else if (is("fcTL")) {
     read_fctl(d, len, seq);
   } else if (is("IDAT")) {

@@ -57,8 +57,13 @@ struct VideoReader::Impl {
 void VideoReader::Impl::open(int threads) {
   av::quiet_logs();
   AVFormatContext* raw = nullptr;
-  BSP_AV_CHECK(VideoDecodeError, avformat_open_input(&raw, path.c_str(), nullptr, nullptr), path,
-               "cannot open");
+  // Untrusted files: the MP4/MOV demuxer only (no probing, so a playlist or a concat script
+  // named .mp4 is not followed) and the "file" protocol only (nothing else is opened).
+  AVDictionary* opts = nullptr;
+  av_dict_set(&opts, "protocol_whitelist", "file", 0);
+  const int opened = avformat_open_input(&raw, path.c_str(), av_find_input_format("mp4"), &opts);
+  av_dict_free(&opts);
+  BSP_AV_CHECK(VideoDecodeError, opened, path, "cannot open as an MP4/MOV file");
   fmt.reset(raw);
   BSP_AV_CHECK(VideoDecodeError, avformat_find_stream_info(fmt.get(), nullptr), path,
                "cannot read the stream parameters");

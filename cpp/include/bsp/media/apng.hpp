@@ -72,6 +72,9 @@ class ApngReader {
   std::vector<double> delays() const;         // seconds each frame is shown
   std::vector<std::uint8_t> dispose_ops() const;
   std::vector<std::uint8_t> blend_ops() const;
+  // "frame K: reason" for the first frame the open found damaged (CRC, truncation, bad
+  // fcTL, sequence error), or "" for an undamaged file.
+  std::string damage() const;
 
   // Writes the composited frames `indices` (any order, repeats allowed) to `out`, which
   // holds indices.size() * height * width * channels bytes.
