@@ -128,3 +128,21 @@ def test_sampler_shares_every_epoch_between_ranks():
         list(ContiguousBatchSampler(10, 2, shuffle=True, num_replicas=2, rank=0))
     with pytest.raises(ValueError, match="rank must lie in"):
         ContiguousBatchSampler(10, 2, num_replicas=2, rank=2)
+
+
+def test_missing_torch_is_an_import_error_naming_the_extra():
+    import os
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['torch'] = None\n"
+            "import bsp_fast.data as d\n"
+            "d.normalize_hips_neck  # NumPy transforms work without torch\n"
+            "d.ClipDataset\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                       timeout=120)
+    assert r.returncode == 1
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("ImportError: bsp_fast.data needs torch")
+    assert "pip install 'bsp_fast[torch]'" in last

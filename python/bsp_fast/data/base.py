@@ -19,8 +19,11 @@ import weakref
 import zlib
 
 import numpy as np
-import torch
-import torch.utils.data
+
+from .._extras import require
+
+torch = require("torch")
+import torch.utils.data  # noqa: E402
 
 from .sampling import ContiguousBatchSampler, IndexBatch, collate_batch, derived_seed
 from .transport import pack_batch

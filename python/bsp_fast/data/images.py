@@ -8,8 +8,11 @@ in crop pixels (pixel ``i`` covers ``[i, i + 1)``, so a horizontal flip maps ``u
 from __future__ import annotations
 
 import numpy as np
-import torch
-import torch.nn.functional as F
+
+from .._extras import require
+
+torch = require("torch")
+import torch.nn.functional as F  # noqa: E402
 
 from .. import skeleton as _sk
 

@@ -16,7 +16,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import torch.utils.data
+
+from .._extras import require
+
+torch = require("torch")
+import torch.utils.data  # noqa: E402
 
 __all__ = ["IndexBatch", "ContiguousBatchSampler", "collate_batch", "derived_seed"]
 
