@@ -26,6 +26,7 @@ import warnings
 from pathlib import Path
 
 from ._native import core as _core
+from .convert_inputs import BadDataset, _dataset_csv, _dataset_fov, _refuse_inputs_as_output
 from .convert_report import ProgressBars, format_report, problems, verify_table
 
 __all__ = ["convert", "conversion_settings", "main", "format_report", "frame_media",
@@ -37,10 +38,6 @@ DEFAULTS = dict(clip_length=30, benchmark_clip_length=16, benchmark_clip_offset=
 
 class UnusableConversion(ValueError):
     """``strict=True`` and the conversion has an empty split or a single-class split."""
-
-
-class BadDataset(ValueError):
-    """The dataset cannot be converted as it is (e.g. a malformed config.yaml): exit 1."""
 
 
 def frame_media(tags, uv) -> dict:
@@ -70,61 +67,6 @@ def crop_resize(image, box, size: int, nearest: bool = False):
         raise ValueError(f"image must be uint8, got {image.dtype}")
     _positive("size", size, allow_none=False)
     return _core.crop_resize(image, np.asarray(box, np.float32), int(size), bool(nearest))
-
-
-def _dataset_csv(dataset) -> tuple[Path, Path]:
-    p = Path(dataset)
-    if p.is_dir():
-        csv = p / "data.csv"
-        if not csv.is_file():
-            raise FileNotFoundError(f"{p}: not a CARLA-BSP dataset (no data.csv inside)")
-        return p, csv
-    if p.is_file():
-        return p.parent, p
-    raise FileNotFoundError(f"{p}: no such dataset directory or data.csv file")
-
-
-def _dataset_fov(root: Path):
-    """FOV from a bsp-synth config.yaml beside data.csv, if there is one; BadDataset when
-    the file is not YAML, its top level not a mapping, or its FOV not a number in (0, 180)."""
-    cfg = root / "config.yaml"
-    if not cfg.is_file():
-        return None
-    import yaml
-
-    try:
-        doc = yaml.safe_load(cfg.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise BadDataset(f"{cfg}: not a readable YAML file: {exc}") from None
-    if doc is None:
-        return None
-    if not isinstance(doc, dict):
-        raise BadDataset(f"{cfg}: expected a mapping (key: value lines) at the top level, "
-                         f"found a {type(doc).__name__}")
-    for key in ("fov", "camera_fov"):
-        if key in doc:
-            v = doc[key]
-            if (not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v)
-                    or not 0 < v < 180):
-                raise BadDataset(f"{cfg}: {key} must be a number of degrees in (0, 180), "
-                                 f"got {v!r}")
-            return float(v)
-    return None
-
-
-def _refuse_inputs_as_output(root: Path, csv: Path, out: Path) -> None:
-    """ValueError when `out` is (or resolves, through symlinks, to) one of the dataset's
-    inputs: data.csv, config.yaml, or a media or CSV file inside the dataset directory."""
-    real = Path(os.path.realpath(out))
-    for inp in (csv, root / "config.yaml"):
-        if real == Path(os.path.realpath(inp)) or (
-                out.exists() and inp.exists() and os.path.samefile(out, inp)):
-            raise ValueError(f"output {out} is the dataset's input {inp}; refusing to "
-                             "overwrite it (choose another output path)")
-    inside = Path(os.path.realpath(root)) in real.parents
-    if inside and real.suffix.lower() in (".csv", ".mp4", ".apng", ".png", ".yaml"):
-        raise ValueError(f"output {out} would replace the dataset's {real.suffix} file "
-                         f"{real}; refusing to overwrite an input (choose another output path)")
 
 
 def _label_fraction(label: str) -> float:
@@ -296,6 +238,10 @@ def _run(csv: str, tmp: str, options: dict, show_progress: bool) -> dict:
                 stage, total, done = prog.stage, prog.total, prog.done
                 if prog.stage == stage:  # a consistent snapshot (no stage change in between)
                     bars.poll(stage, total, done)
+    except BaseException:  # Ctrl-C, SIGTERM: the C++ work stops and is joined before we leave
+        prog.cancel()
+        t.join()
+        raise
     finally:
         bars.close(completed="report" in result)
     if "error" in result:
@@ -385,8 +331,31 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread so that the temporary output is removed."""
+
+
+def _on_sigterm(signum, frame):
+    raise _Terminated()
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
+    import signal
+
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main else None
+    try:
+        return _main(args)
+    except _Terminated:
+        print("bsp-convert: terminated; no output written", file=sys.stderr)
+        return 143
+    finally:
+        if in_main:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main(args) -> int:
     try:
         with warnings.catch_warnings():  # printed below, once, in the summary
             warnings.simplefilter("ignore", UserWarning)
@@ -408,6 +377,8 @@ def main(argv=None) -> int:
     except ValueError as exc:
         print(f"bsp-convert: {exc}", file=sys.stderr)
         return 2
+    except _Terminated:
+        raise
     except KeyboardInterrupt:
         print("bsp-convert: interrupted; no output written", file=sys.stderr)
         return 130

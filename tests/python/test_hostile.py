@@ -280,3 +280,78 @@ def test_hls_playlist_named_mp4_cannot_pull_in_other_files(mds, tmp_path):
     with pytest.raises(bf.VideoDecodeError, match=f"{mp4}: cannot open as an MP4/MOV file"):
         cv.convert(mds, tmp_path / "o.h5", clip_length=10, crop_size=16)
     assert not (tmp_path / "o.h5").exists()
+
+
+# ---------------------------------------------------------------- item 4: Ctrl-C and SIGTERM
+
+class _InterruptingBars:
+    """Stands in for the progress bars: the first poll while the C++ conversion runs raises
+    KeyboardInterrupt in the main thread, as Ctrl-C would."""
+
+    def __init__(self, show):
+        pass
+
+    def poll(self, stage, total, done):
+        raise KeyboardInterrupt
+
+    def close(self, completed):
+        pass
+
+
+def test_ctrl_c_stops_and_joins_the_conversion(mds, tmp_path, monkeypatch):
+    import threading
+
+    monkeypatch.setattr(cv, "ProgressBars", _InterruptingBars)
+    with pytest.raises(KeyboardInterrupt):
+        cv.convert(mds, tmp_path / "o.h5", clip_length=10, crop_size=16, threads=1,
+                   progress=True)
+    # Nothing of the conversion runs on after the interrupt, and nothing is left behind.
+    assert not [t for t in threading.enumerate() if t.name == "bsp-convert"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["copy"]
+
+
+def test_sigterm_removes_the_temporary_output(mds, tmp_path):
+    import subprocess
+    import sys
+
+    script = f"""
+import os, signal, sys
+from bsp_fast import conversion as cv
+
+class Bars:
+    def __init__(self, show): pass
+    def poll(self, stage, total, done): os.kill(os.getpid(), signal.SIGTERM)
+    def close(self, completed): pass
+
+cv.ProgressBars = Bars
+cv._is_terminal = lambda stream: True
+sys.exit(cv.main(["--clip-length", "10", "--crop-size", "16", "--threads", "1",
+                  {str(mds)!r}, {str(tmp_path / "o.h5")!r}]))
+"""
+    p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                       env={**os.environ}, timeout=120)
+    assert p.returncode == 143, p.stderr
+    assert "terminated; no output written" in p.stderr
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["copy"]
+
+
+# ---------------------------------------------------------------- item 3: disk full while writing
+
+def test_disk_full_is_a_clean_error_not_a_crash_at_exit(mds, tmp_path):
+    import subprocess
+    import sys
+
+    # A file size limit makes every write past 200 kB fail (EFBIG), as a full disk would.
+    script = f"""
+import resource, signal, sys
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))
+from bsp_fast import conversion as cv
+sys.exit(cv.main(["--quiet", "--clip-length", "10", "--crop-size", "64", "--threads", "1",
+                  {str(mds)!r}, {str(tmp_path / "o.h5")!r}]))
+"""
+    p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                       env={**os.environ}, timeout=120)
+    assert p.returncode == 1, p.stderr  # not 139 (SIGSEGV in libhdf5's exit handler)
+    assert "Hdf5Error" in p.stderr and ".o.h5.tmp-" in p.stderr
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["copy"]

@@ -118,7 +118,10 @@ BSP_BINDING(convert) {
       .def(py::init<>())
       .def_property_readonly("stage", [](const bsp::ConvertProgress& p) { return p.stage.load(); })
       .def_property_readonly("done", [](const bsp::ConvertProgress& p) { return p.done.load(); })
-      .def_property_readonly("total", [](const bsp::ConvertProgress& p) { return p.total.load(); });
+      .def_property_readonly("total", [](const bsp::ConvertProgress& p) { return p.total.load(); })
+      .def("cancel", [](bsp::ConvertProgress& p) { p.cancel = true; },
+           "Asks the running conversion to stop; it joins its threads and raises Error.")
+      .def_property_readonly("cancelled", [](const bsp::ConvertProgress& p) { return p.cancel.load(); });
   m.def("convert_csv", &convert, py::arg("csv_path"), py::arg("out_path"),
         py::arg("progress") = nullptr,
         "Converts data.csv into an HDF5 file of train/val/test clips; returns the report.");

@@ -291,6 +291,10 @@ void verify(const PoseTable& table, const Plan& plan, const ConvertOptions& opt,
 
 }  // namespace
 
+void check_cancel(const ConvertProgress* p) {
+  if (p && p->cancel.load(std::memory_order_relaxed)) throw Error("conversion cancelled");
+}
+
 ConvertReport convert_csv(const std::string& csv_path, const std::string& out_path,
                           const ConvertOptions& opt, ConvertProgress* progress) {
   check_media_options(opt.media);
@@ -309,6 +313,7 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
   std::vector<BadMedia> bad;
   double check_seconds = 0;
   for (int writes = 1;;) {
+    check_cancel(progress);
     ConvertReport report = base;
     t0 = Clock::now();
     const Plan plan = plan_excluding(table, opt.clips, excluded);
@@ -324,7 +329,9 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
         continue;
       }
     }
+    check_cancel(progress);
     if (opt.verify) verify(table, plan, opt, report, progress);
+    check_cancel(progress);
     report.media.bad = bad;
     auto failed = write_output(out_path, table, plan, opt.media.enabled ? &media : nullptr, opt,
                                report, progress);

@@ -167,6 +167,7 @@ std::vector<MediaFailure> check_media(const PoseTable& t, const std::array<Frame
   std::atomic<std::size_t> next{0};
   auto work = [&] {
     for (std::size_t i; (i = next++) < items.size();) {
+      if (progress && progress->cancel) break;
       const FrameTable& ft = *items[i].table;
       const std::size_t b = items[i].block, rec = ft.recordings[b];
       result[i].recording = static_cast<std::uint32_t>(rec);
@@ -188,6 +189,7 @@ std::vector<MediaFailure> check_media(const PoseTable& t, const std::array<Frame
   for (int i = 1; i < n; ++i) pool.emplace_back(work);
   work();
   for (auto& th : pool) th.join();
+  check_cancel(progress);
   std::vector<MediaFailure> failed;
   for (auto& r : result)
     if (r.error) failed.push_back(std::move(r));

@@ -169,6 +169,7 @@ std::vector<MediaFailure> write_media(const std::array<const h5::Group*, 3>& gro
     const FrameTable& ft = tables[static_cast<std::size_t>(blocks[i].first)];
     const std::size_t b = blocks[i].second;
     try {
+      check_cancel(progress);  // a failure without a path: never skipped, always rethrown
       return decode_block(t, ft, b, files[ft.recordings[b]], S, progress);
     } catch (...) {  // e.g. bad_alloc before decoding started
       MediaBlock failed;
@@ -185,6 +186,7 @@ std::vector<MediaFailure> write_media(const std::array<const h5::Group*, 3>& gro
   std::vector<MediaFailure> failures;
   for (std::size_t i = 0; i < blocks.size(); ++i) {
     MediaBlock block = queue.take(i);
+    check_cancel(progress);
     if (block.failure.error) {
       // Only media errors may be skipped (decode_block names the file before opening it).
       if (!opt.media.skip_bad_media || block.failure.path.empty())

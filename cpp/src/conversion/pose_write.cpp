@@ -112,6 +112,7 @@ void write_split(const h5::Group& g, const PoseTable& t, const Plan& plan,
   for (std::size_t i = 0; i < fields.size(); ++i)
     buf[i].resize(batch * static_cast<std::size_t>(L) * fields[i].per_frame() * fields[i].elem());
   for (std::size_t c0 = 0; c0 < N; c0 += batch) {
+    check_cancel(progress);
     const std::size_t nb = std::min<std::size_t>(batch, N - c0);
     parallel_for(nb * static_cast<std::size_t>(L), 256, [&](std::size_t lo, std::size_t hi) {
       for (std::size_t s = lo; s < hi; ++s) {

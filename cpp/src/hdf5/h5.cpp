@@ -26,7 +26,14 @@ herr_t walk_cb(unsigned n, const H5E_error2_t* e, void* data) {
 
 void quiet() {
   static std::once_flag once;
-  std::call_once(once, [] { H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); });
+  std::call_once(once, [] {
+    // No library shutdown at process exit: after a failed flush (disk full) libhdf5 cannot
+    // free the file and its atexit handler crashed the process (exit 139 instead of 1).
+    // Every file is closed explicitly by the code that opened it. (Only effective while
+    // the library is not yet initialised; it is a no-op otherwise.)
+    H5dont_atexit();
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+  });
 }
 
 hid_t check(hid_t id, const std::string& what) {

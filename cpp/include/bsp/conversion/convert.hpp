@@ -45,7 +45,14 @@ struct ConvertProgress {
   // (done/total count rows in stage 0, media files in 5, frames in 6, clips otherwise).
   std::atomic<int> stage{0};
   std::atomic<std::uint64_t> done{0}, total{0};
+  // Set from another thread to stop the conversion: every stage checks it between units of
+  // work (rows of clips, media files, recordings), joins its worker threads and throws
+  // bsp::Error("conversion cancelled"), leaving nothing running.
+  std::atomic<bool> cancel{false};
 };
+
+// Throws bsp::Error("conversion cancelled") when `p` asks to stop.
+void check_cancel(const ConvertProgress* p);
 
 struct VerifyRow {
   std::string recording;  // video path without extension + "/<camera>_<pedestrian>"
