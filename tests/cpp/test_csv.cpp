@@ -1,4 +1,7 @@
 #include <doctest/doctest.h>
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -7,6 +10,7 @@
 #include <fstream>
 #include <random>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -400,6 +404,31 @@ TEST_CASE("read_pose_csv refuses CR-only line ends instead of reading zero rows 
   const std::string q = tmp.write("crlf.csv", join(std::vector<std::string>(
       kPoseCsvColumns.begin(), kPoseCsvColumns.end()), "\r\n") + join(row_cells(1), "\r\n"));
   CHECK(read_pose_csv(q).rows == 1);
+}
+
+TEST_CASE("a read past the end of a file truncated under its mapping is caught (issue 15)") {
+  TempDir tmp;
+  const std::size_t size = std::size_t{1} << 16;
+  const std::string p = tmp.write("shrinks.csv", std::string(size, 'x'));
+  const int fd = ::open(p.c_str(), O_RDONLY);
+  REQUIRE(fd >= 0);
+  void* map = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
+  REQUIRE(map != MAP_FAILED);
+  const auto* bytes = static_cast<const volatile char*>(map);
+  REQUIRE(bytes[40000] == 'x');
+  REQUIRE(::truncate(p.c_str(), 100) == 0);  // another process cuts the file
+  {
+    csv_detail::SigbusGuard guard;
+    volatile char c = 0;
+    CHECK_FALSE(csv_detail::guarded([&] { c = bytes[40000]; }));  // SIGBUS, caught
+    CHECK(csv_detail::guarded([&] { c = bytes[10]; }));             // still mapped
+    CHECK(c == 'x');
+    CHECK_THROWS_AS(csv_detail::guarded([] { throw std::runtime_error("passes through"); }),
+                    std::runtime_error);
+    CHECK(csv_detail::sigbus_jump() == nullptr);
+  }
+  ::munmap(map, size);
+  ::close(fd);
 }
 
 TEST_CASE("read_pose_csv reports its progress in rows") {

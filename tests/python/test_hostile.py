@@ -355,3 +355,35 @@ sys.exit(cv.main(["--quiet", "--clip-length", "10", "--crop-size", "64", "--thre
     assert p.returncode == 1, p.stderr  # not 139 (SIGSEGV in libhdf5's exit handler)
     assert "Hdf5Error" in p.stderr and ".o.h5.tmp-" in p.stderr
     assert sorted(x.name for x in tmp_path.iterdir()) == ["copy"]
+
+
+# ---------------------------------------------------------------- item 5: data.csv truncated while mapped
+
+def test_data_csv_truncated_while_read_is_an_error_not_sigbus(media_ds, tmp_path):
+    import subprocess
+    import sys
+
+    lines = (media_ds / "data.csv").read_text().splitlines()
+    big = tmp_path / "data.csv"
+    big.write_text(lines[0] + "\n" + "\n".join(lines[1:] * 40) + "\n")  # about 35 MB
+    script = f"""
+import os, shutil, threading, time
+import bsp_fast as bf
+outcomes = []
+for delay in (0.0, 0.02, 0.05, 0.1):
+    shutil.copy({str(big)!r}, {str(tmp_path / "c.csv")!r})
+    cut = threading.Thread(target=lambda: (time.sleep(delay), os.truncate({str(tmp_path / "c.csv")!r}, 1000)))
+    cut.start()
+    try:
+        bf.read_csv({str(tmp_path / "c.csv")!r})
+        outcomes.append("read")
+    except bf.CsvParseError as e:
+        outcomes.append("changed" if "the file changed while it was being read" in str(e) else "other")
+    cut.join()
+print(" ".join(outcomes))
+"""
+    p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                       env={**os.environ}, timeout=300)
+    assert p.returncode == 0, (p.returncode, p.stderr)  # today: -7 (SIGBUS)
+    outcomes = p.stdout.split()
+    assert len(outcomes) == 4 and set(outcomes) <= {"read", "changed", "other"}

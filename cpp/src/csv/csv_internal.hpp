@@ -6,6 +6,8 @@
 #pragma once
 #include <fast_float/fast_float.h>
 
+#include <setjmp.h>
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -69,6 +71,40 @@ struct Lines {
 // the scans.
 void release_pages(const char* base, std::size_t from, std::size_t to);
 inline constexpr std::size_t kReleaseBytes = std::size_t{16} << 20;
+
+// SIGBUS while reading the mapping means the file shrank under us (truncated by another
+// process). While a SigbusGuard exists, a SIGBUS raised inside `guarded(fn)` on the same
+// thread jumps back out of it: guarded() returns false instead of the process dying.
+// SIGBUS anywhere else goes to the handler installed before (or kills, as by default).
+class SigbusGuard {
+ public:
+  SigbusGuard();
+  ~SigbusGuard();
+  SigbusGuard(const SigbusGuard&) = delete;
+  SigbusGuard& operator=(const SigbusGuard&) = delete;
+};
+sigjmp_buf*& sigbus_jump();  // this thread's target (null outside guarded())
+struct FileChanged {};       // thrown by a worker whose guarded read was cut short
+
+// Runs fn(); false if it was cut short by a SIGBUS (what fn allocated is then leaked).
+template <class Fn>
+bool guarded(Fn&& fn) {
+  sigjmp_buf here;
+  sigjmp_buf* const outer = sigbus_jump();
+  if (sigsetjmp(here, 1) != 0) {
+    sigbus_jump() = outer;
+    return false;
+  }
+  sigbus_jump() = &here;
+  try {
+    fn();
+  } catch (...) {
+    sigbus_jump() = outer;
+    throw;
+  }
+  sigbus_jump() = outer;
+  return true;
+}
 
 // Parses every data line into the columns selected by `cols` (header cell -> column index
 // or -1 to skip), in parallel; throws CsvParseError naming the first bad row.

@@ -1,6 +1,7 @@
 // data.csv reader: mmap, line index, header, then parallel row parsing straight into the
 // preallocated columns of a PoseTable (SPEC section 1).
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -68,6 +69,42 @@ void csv_detail::release_pages(const char* base, std::size_t from, std::size_t t
 }
 
 namespace {
+std::mutex g_sigbus_mutex;
+int g_sigbus_users = 0;
+struct sigaction g_sigbus_previous {};
+
+void on_sigbus(int sig, siginfo_t* info, void* ctx) {
+  if (sigjmp_buf* target = csv_detail::sigbus_jump()) siglongjmp(*target, 1);
+  // Not a read of ours: hand it to whoever had SIGBUS before, or die as by default.
+  const struct sigaction& prev = g_sigbus_previous;
+  if ((prev.sa_flags & SA_SIGINFO) && prev.sa_sigaction) return prev.sa_sigaction(sig, info, ctx);
+  if (prev.sa_handler != SIG_DFL && prev.sa_handler != SIG_IGN) return prev.sa_handler(sig);
+  ::signal(SIGBUS, SIG_DFL);
+  ::raise(SIGBUS);
+}
+}  // namespace
+
+sigjmp_buf*& csv_detail::sigbus_jump() {
+  thread_local sigjmp_buf* target = nullptr;
+  return target;
+}
+
+csv_detail::SigbusGuard::SigbusGuard() {
+  std::lock_guard<std::mutex> lock(g_sigbus_mutex);
+  if (g_sigbus_users++ > 0) return;
+  struct sigaction sa {};
+  sa.sa_sigaction = on_sigbus;
+  sa.sa_flags = SA_SIGINFO | SA_NODEFER;
+  sigemptyset(&sa.sa_mask);
+  ::sigaction(SIGBUS, &sa, &g_sigbus_previous);
+}
+
+csv_detail::SigbusGuard::~SigbusGuard() {
+  std::lock_guard<std::mutex> lock(g_sigbus_mutex);
+  if (--g_sigbus_users == 0) ::sigaction(SIGBUS, &g_sigbus_previous, nullptr);
+}
+
+namespace {
 
 // Offsets of every '\n', found in parallel over byte ranges (memchr-bound), each flagged
 // when a '\r' precedes it. The flag is taken while the page is hot, so the index below
@@ -77,21 +114,28 @@ struct Newlines {
   std::vector<std::uint8_t> cr;
 };
 
+[[noreturn]] void throw_file_changed() {
+  throw csv_detail::FileChanged();
+}
+
 Newlines find_newlines(const char* data, std::size_t size, int threads) {
   std::mutex mutex;
   std::vector<std::pair<std::size_t, Newlines>> parts;
   parallel_for(size, std::size_t{1} << 22, [&](std::size_t lo, std::size_t hi) {
     Newlines found;
-    for (std::size_t a = lo; a < hi; a += kReleaseBytes) {
-      const std::size_t b = std::min(hi, a + kReleaseBytes);
-      for (const char* p = data + a; p < data + b; ++p) {
-        p = static_cast<const char*>(std::memchr(p, '\n', static_cast<std::size_t>(data + b - p)));
-        if (!p) break;
-        found.pos.push_back(static_cast<std::size_t>(p - data));
-        found.cr.push_back(p > data && p[-1] == '\r');
+    const bool whole = csv_detail::guarded([&] {
+      for (std::size_t a = lo; a < hi; a += kReleaseBytes) {
+        const std::size_t b = std::min(hi, a + kReleaseBytes);
+        for (const char* p = data + a; p < data + b; ++p) {
+          p = static_cast<const char*>(std::memchr(p, '\n', static_cast<std::size_t>(data + b - p)));
+          if (!p) break;
+          found.pos.push_back(static_cast<std::size_t>(p - data));
+          found.cr.push_back(p > data && p[-1] == '\r');
+        }
+        release_pages(data, a, b);
       }
-      release_pages(data, a, b);
-    }
+    });
+    if (!whole) throw_file_changed();
     std::lock_guard<std::mutex> lock(mutex);
     parts.emplace_back(lo, std::move(found));
   }, threads);
@@ -242,6 +286,10 @@ void check_duplicates(const PoseTable& t) {
       std::to_string(t.line[order[first]]) + " and line " + std::to_string(t.line[r]));
 }
 
+void parse_file(const char* data, std::size_t size, const std::string& path,
+                const CsvReadOptions& opt, const std::vector<bool>& wanted, int threads,
+                PoseTable& t);
+
 }  // namespace
 
 PoseTable read_pose_csv(const std::string& path, const CsvReadOptions& opt) {
@@ -249,9 +297,26 @@ PoseTable read_pose_csv(const std::string& path, const CsvReadOptions& opt) {
   const int threads = opt.threads > 0 ? opt.threads : num_threads();
   MappedFile file(path);
   if (file.size() == 0) throw CsvParseError(path + ", line 1 (header): empty file, no header");
+  // Another process may truncate the file while it is mapped: every read of the mapping is
+  // guarded, and a SIGBUS becomes this error instead of killing the process.
+  csv_detail::SigbusGuard sigbus;
   PoseTable t;
+  try {
+    if (csv_detail::guarded([&] { parse_file(file.data(), file.size(), path, opt, wanted,
+                                             threads, t); }))
+      return t;
+  } catch (const csv_detail::FileChanged&) {
+  }
+  throw CsvParseError(path + ": the file changed while it was being read (truncated by "
+                      "another process?); nothing was parsed");
+}
+
+namespace {
+void parse_file(const char* data, std::size_t size, const std::string& path,
+                const CsvReadOptions& opt, const std::vector<bool>& wanted, int threads,
+                PoseTable& t) {
   t.path = path;
-  const csv_detail::Lines lines = index_lines(file.data(), file.size(), threads);
+  const csv_detail::Lines lines = index_lines(data, size, threads);
   // A '\r' left inside the first line means CR-only line ends (classic Mac): the whole
   // file would read as a header and no rows. Refused rather than converted to nothing.
   if (const std::size_t cr = lines.header.find('\r'); cr != std::string_view::npos)
@@ -263,9 +328,9 @@ PoseTable read_pose_csv(const std::string& path, const CsvReadOptions& opt) {
   t.rows = lines.begin.size();
   t.line = lines.number;
   if (opt.rows_total) *opt.rows_total = t.rows;
-  csv_detail::parse_rows(file.data(), lines, names, cols, t, threads, opt.rows_done);
+  csv_detail::parse_rows(data, lines, names, cols, t, threads, opt.rows_done);
   if (opt.check_duplicates) check_duplicates(t);
-  return t;
 }
+}  // namespace
 
 }  // namespace bsp

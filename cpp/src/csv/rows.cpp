@@ -174,7 +174,7 @@ void parse_rows(const char* data, const Lines& lines, const std::vector<std::str
     auto b = std::make_unique<Block>();
     b->lo = lo, b->hi = hi;
     b->dicts.resize(static_cast<std::size_t>(dicts));
-    parse_block(data, lines, targets, *b, rows_done);
+    if (!guarded([&] { parse_block(data, lines, targets, *b, rows_done); })) throw FileChanged();
     std::lock_guard<std::mutex> lock(mutex);
     blocks.push_back(std::move(b));
   }, threads);
