@@ -119,3 +119,17 @@ def test_sample_preset_gives_both_classes_in_every_split(tmp_path):
     counts = {k: (rep["splits"][k]["not-crossing"], rep["splits"][k]["crossing"])
               for k in ("train", "val", "test")}
     assert all(n > 0 and c > 0 for n, c in counts.values()), counts
+
+
+def test_cli_knows_every_preset(tmp_path, capsys):
+    from bsp_fast.synth.config import PRESETS
+
+    with pytest.raises(SystemExit):
+        cli_main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for name in PRESETS:
+        assert f"{name}: {PRESETS[name]['number_of_clips']} clips" in text
+    # --preset medium with its size overridden: a tiny run through the CLI.
+    assert cli_main([str(tmp_path / "m"), "--preset", "medium", "--clips", "1", "--frames",
+                     "5", "--size", "64x48", "--poses-only", "--quiet"]) == 0
+    assert yaml.safe_load((tmp_path / "m" / "config.yaml").read_text())["preset"] == "medium"

@@ -15,6 +15,8 @@ from bsp_fast.synth.motion import min_rotation
 def test_presets_and_overrides():
     s = make_config("sample")
     assert (s.number_of_clips, s.width, s.height, s.camera_fov) == (20, 640, 240, 90.0)
+    m = make_config("medium")
+    assert (m.number_of_clips, m.clip_length_in_frames, m.width, m.height) == (160, 300, 1600, 600)
     f = make_config("full")
     assert (f.number_of_clips, f.clip_length_in_frames, f.width, f.height) == (396, 900, 1600, 600)
     c = make_config("full", dict(number_of_clips=3, camera_image_size="320x128"))

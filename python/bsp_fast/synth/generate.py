@@ -108,7 +108,8 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
              force: bool = False, progress: bool = True) -> dict:
     """Generates a CARLA-BSP-format dataset under ``out_dir`` and returns a summary dict.
 
-    preset: ``sample`` (4 clips x 90 frames, 640x240) or ``full`` (396 x 900, 1600x600).
+    preset: ``sample`` (20 clips x 150 frames, 640x240), ``medium`` or ``full`` (396 x 900,
+        1600x600); see ``PRESETS`` and docs/synth.md.
     clips, frames, size ('WxH' or (W, H)), fov, seed: override the preset and the config.
     config: a YAML file with the original generator's keys (number_of_clips,
         clip_length_in_frames, pedestrian_distributions, camera_position_distributions,
