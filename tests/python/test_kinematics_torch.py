@@ -147,3 +147,11 @@ def test_bad_inputs_raise():
     with pytest.raises(ValueError, match="allowed ages"):
         profile_index(["adult"], ["robot"])
     assert profile_index(["child", "adult"], ["male", "female"]).tolist() == [3, 0]
+
+
+def test_reference_hips_neck_matches_the_skeleton_module():
+    from bsp_fast.models.kinematics import ReferenceSkeletons
+
+    ref = ReferenceSkeletons()
+    for i, (age, gender) in enumerate(PROFILES):
+        assert abs(ref.hips_neck[i].item() - sk.hips_neck_length(age, gender)) < 1e-6

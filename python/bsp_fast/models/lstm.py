@@ -2,6 +2,8 @@
 lifting through forward kinematics."""
 from __future__ import annotations
 
+import functools
+
 import torch
 from torch import nn
 
@@ -26,7 +28,22 @@ class _LSTMBody(nn.Module):
         self.lstm = nn.LSTM(J * in_channels, hidden_size, num_layers, batch_first=True)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.lstm(x.flatten(2))[0]  # (B, L, hidden)
+        x = x.flatten(2)
+        if x.device.type == "cpu" and torch.is_autocast_enabled("cpu") and not _cpu_bf16():
+            # oneDNN has no bf16 LSTM without CPU bf16 support ("could not create a
+            # primitive descriptor"): run this layer in float32 there
+            with torch.autocast("cpu", enabled=False):
+                return self.lstm(x.float())[0]
+        return self.lstm(x)[0]  # (B, L, hidden)
+
+
+@functools.lru_cache(maxsize=None)
+def _cpu_bf16() -> bool:
+    """Whether oneDNN runs bf16 kernels on this CPU (AVX512-BF16 / AMX)."""
+    try:
+        return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+    except (AttributeError, RuntimeError):
+        return False
 
 
 @register("classification", "lstm",

@@ -13,13 +13,14 @@ __all__ = ["PoseCNN", "soft_argmax"]
 
 J = _sk.NUM_JOINTS
 HEADS = ("regression", "heatmap")
+NORMS = ("group", "batch")
 TEMPORAL = ("gru", "none")
 _MEAN, _STD = 0.45, 0.25  # crops are scaled to [0, 1], then (x - mean) / std
 
 
-def _conv(cin: int, cout: int, stride: int = 1) -> list:
-    return [nn.Conv2d(cin, cout, 3, stride, 1, bias=False), nn.BatchNorm2d(cout),
-            nn.ReLU(inplace=True)]
+def _conv(cin: int, cout: int, stride: int = 1, norm: str = "group") -> list:
+    layer = (nn.GroupNorm(min(8, cout), cout) if norm == "group" else nn.BatchNorm2d(cout))
+    return [nn.Conv2d(cin, cout, 3, stride, 1, bias=False), layer, nn.ReLU(inplace=True)]
 
 
 def soft_argmax(heatmaps: torch.Tensor, beta: torch.Tensor | float = 1.0) -> torch.Tensor:
@@ -55,19 +56,20 @@ class PoseCNN(PoseEstimationModel):
     """
 
     def __init__(self, *, width: int = 32, hidden: int = 256, head: str = "regression",
-                 temporal: str = "gru", dropout: float = 0.0):
+                 temporal: str = "gru", norm: str = "group", dropout: float = 0.0):
         super().__init__(locals())
         check_int("width", width)
         check_int("hidden", hidden, minimum=2)
         check_choice("head", head, HEADS)
         check_choice("temporal", temporal, TEMPORAL)
+        check_choice("norm", norm, NORMS)
         check_float("dropout", dropout, 0.0, 1.0, hi_open=True)
         w = width
         self.head_kind, self.temporal_kind = head, temporal
-        self.stem = nn.Sequential(*_conv(3, w, 2))
-        self.stage1 = nn.Sequential(*_conv(w, 2 * w, 2), *_conv(2 * w, 2 * w))
-        self.stage2 = nn.Sequential(*_conv(2 * w, 4 * w, 2), *_conv(4 * w, 4 * w))
-        self.stage3 = nn.Sequential(*_conv(4 * w, 8 * w, 2), *_conv(8 * w, 8 * w))
+        self.stem = nn.Sequential(*_conv(3, w, 2, norm))
+        self.stage1 = nn.Sequential(*_conv(w, 2 * w, 2, norm), *_conv(2 * w, 2 * w, 1, norm))
+        self.stage2 = nn.Sequential(*_conv(2 * w, 4 * w, 2, norm), *_conv(4 * w, 4 * w, 1, norm))
+        self.stage3 = nn.Sequential(*_conv(4 * w, 8 * w, 2, norm), *_conv(8 * w, 8 * w, 1, norm))
         self.pool = nn.AdaptiveAvgPool2d(4)
         self.embed = nn.Sequential(nn.Flatten(), nn.Dropout(dropout),
                                    nn.Linear(8 * w * 16, hidden), nn.ReLU(inplace=True))
