@@ -135,3 +135,12 @@ def test_convert_progress_default_follows_the_terminal(one_class, tmp_path, monk
     monkeypatch.setattr("sys.stderr", io.StringIO())
     cv.convert(one_class, tmp_path / "n.h5", clip_length=10, media=False)
     assert seen["progress"] is False
+
+
+def test_make_demo_converts_strictly():
+    from pathlib import Path
+
+    makefile = (Path(__file__).resolve().parents[2] / "Makefile").read_text()
+    demo = makefile[makefile.index("\ndemo:"):].split("\n\n")[0]
+    convert = [line for line in demo.splitlines() if "convert" in line]
+    assert len(convert) == 1 and "--strict" in convert[0].split()
