@@ -431,6 +431,21 @@ TEST_CASE("a read past the end of a file truncated under its mapping is caught (
   ::close(fd);
 }
 
+TEST_CASE("a non-UTF-8 byte in a number cell gives an error message that is valid UTF-8") {
+  TempDir tmp;
+  std::vector<std::string> cells = row_cells(2);
+  cells[11] = "1\xff";
+  const std::string p = tmp.write("b.csv", header_line() + join(row_cells(1)) + join(cells));
+  const std::string e = error_of(p);
+  CHECK(e == p + ", line 3, column 'frame.idx': expected an integer, found '1\\xff'");
+  CHECK(is_valid_utf8(e));
+  cells[11] = "2";
+  cells[0] = "caf\xc3\xa9";  // valid UTF-8 stays readable in messages
+  cells[4] = "0";
+  const std::string q = tmp.write("c.csv", header_line() + join(row_cells(1)) + join(cells));
+  CHECK(error_of(q).find("found '0'") != std::string::npos);
+}
+
 TEST_CASE("read_pose_csv reports its progress in rows") {
   TempDir tmp;
   std::string text = header_line();
@@ -510,7 +525,8 @@ TEST_CASE("UTF-8 check: Python's strict decoder's rules, and the first bad strin
   const PoseTable t = read_pose_csv(path);  // bytes are kept as they are
   CHECK(t.model.values[1] == "walker\xff");
   CHECK_THROWS_WITH_AS(check_utf8(t),
-                       (path + ", column 'pedestrian.model': value 'walker\\xff' is not valid UTF-8")
+                       (path + ", line 3, column 'pedestrian.model': value 'walker\\xff' is not "
+                               "valid UTF-8")
                            .c_str(),
                        CsvParseError);
   CsvReadOptions numbers_only;

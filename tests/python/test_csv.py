@@ -235,8 +235,8 @@ def test_error_string_not_utf8(tmp_path):
     p = write_text(tmp_path / "u.csv", [cells_of(1), cells_of(2)])
     data = open(p, "rb").read()
     open(p, "wb").write(data.replace(b"walker.pedestrian.0001", b"walker\xff", 1))
-    assert error_text(p) == (f"{p}, column 'pedestrian.model': value 'walker\\xff' is not valid "
-                             "UTF-8")
+    assert error_text(p) == (f"{p}, line 2, column 'pedestrian.model': value 'walker\\xff' is "
+                             "not valid UTF-8")
     # Only the columns that are read are decoded.
     assert len(bsp_fast.read_csv(p, columns=["frame.idx"], check_duplicates=False)) == 2
 

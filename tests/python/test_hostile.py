@@ -387,3 +387,30 @@ print(" ".join(outcomes))
     assert p.returncode == 0, (p.returncode, p.stderr)  # today: -7 (SIGBUS)
     outcomes = p.stdout.split()
     assert len(outcomes) == 4 and set(outcomes) <= {"read", "changed", "other"}
+
+
+# ---------------------------------------------------------------- item 11: bytes that are not UTF-8
+
+def _put_bytes(path, line, column, value: bytes):
+    """Sets one cell to raw bytes (latin-1 maps each byte to one character and back)."""
+    rows = list(csv.reader(io.StringIO(path.read_bytes().decode("latin-1"), newline="")))
+    rows[line - 1][rows[0].index(column)] = value.decode("latin-1")
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(rows)
+    path.write_bytes(buf.getvalue().encode("latin-1"))
+
+
+@pytest.mark.parametrize("column,value,match", [
+    ("id", b"clip\xff\xfe", r"line 6, column 'id': value 'clip\\xff\\xfe' is not valid UTF-8"),
+    ("pedestrian.model", b"walker\xc3", r"line 6, column 'pedestrian.model': value 'walker\\xc3'"),
+    ("frame.idx", b"5\xff", r"line 6, column 'frame.idx': expected an integer, found '5\\xff'"),
+])
+def test_non_utf8_bytes_are_bad_input_with_line_and_column(ds, tmp_path, capsys, column, value,
+                                                          match):
+    _put_bytes(ds / "data.csv", 6, column, value)
+    with pytest.raises(bf.CsvParseError, match=match):
+        convert(ds, tmp_path / "o.h5")
+    assert cli(ds, tmp_path / "o.h5") == 1  # bad input, not bad arguments
+    err = capsys.readouterr().err
+    assert "CsvParseError" in err and "line 6" in err
+    assert not list(tmp_path.glob("*.h5")) and not list(tmp_path.glob(".o.h5*"))

@@ -1,4 +1,5 @@
 #include "bsp/conversion/convert.hpp"
+#include "bsp/csv/columns.hpp"
 
 #include <fcntl.h>
 #include <libdeflate.h>
@@ -306,6 +307,7 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
   ro.threads = opt.threads;
   if (progress) ro.rows_total = &progress->total, ro.rows_done = &progress->done;  // stage 0: rows
   const PoseTable table = read_pose_csv(csv_path, ro);
+  check_utf8(table);  // ids and paths reach Python and HDF5 as text
   base.seconds["read"] = since(t0);
   if (progress) progress->done = table.rows, progress->stage = 1;
 

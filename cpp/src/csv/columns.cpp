@@ -115,10 +115,19 @@ void check_utf8(const PoseTable& t) {
   for (const std::string& name : t.columns_present) {
     const PoseColumn col = pose_column(table, name);
     if (!col.strings) continue;
-    for (const std::string& v : col.strings->values)
-      if (!is_valid_utf8(v))
-        throw CsvParseError(t.path + ", column '" + col.spec->name + "': value " +
-                            ascii_snippet(v) + " is not valid UTF-8");
+    for (std::size_t k = 0; k < col.strings->values.size(); ++k) {
+      const std::string& v = col.strings->values[k];
+      if (is_valid_utf8(v)) continue;
+      // Codes are first-seen: the first row holding code k is its first line in the file.
+      std::string line;
+      for (std::size_t r = 0; r < t.rows && r < t.line.size(); ++r)
+        if (col.strings->codes[r] == static_cast<std::int32_t>(k)) {
+          line = ", line " + std::to_string(t.line[r]);
+          break;
+        }
+      throw CsvParseError(t.path + line + ", column '" + col.spec->name + "': value " +
+                          ascii_snippet(v) + " is not valid UTF-8");
+    }
   }
 }
 

@@ -1,4 +1,5 @@
 // The data.csv schema: column names in the writer's order, their kinds and shapes.
+#include <algorithm>
 #include <cstdio>
 
 #include "bsp/csv/columns.hpp"
@@ -87,13 +88,16 @@ std::string allowed_columns() {
 }
 
 std::string snippet(std::string_view text, std::size_t max_chars) {
+  // Messages reach Python, which decodes them strictly: bytes of a cell that is not valid
+  // UTF-8 are written as \xNN (valid non-ASCII text is kept as it is).
+  const bool raw_ok = is_valid_utf8(text.substr(0, std::min(text.size(), max_chars)));
   std::string out = "'";
   for (std::size_t i = 0; i < text.size() && i < max_chars; ++i) {
     const unsigned char c = static_cast<unsigned char>(text[i]);
     if (c == '\\' || c == '\'') {
       out += '\\';
       out += static_cast<char>(c);
-    } else if (c < 0x20 || c == 0x7f) {
+    } else if (c < 0x20 || c == 0x7f || (c >= 0x80 && !raw_ok)) {
       char buf[8];
       std::snprintf(buf, sizeof buf, "\\x%02x", c);
       out += buf;
