@@ -414,3 +414,20 @@ def test_non_utf8_bytes_are_bad_input_with_line_and_column(ds, tmp_path, capsys,
     err = capsys.readouterr().err
     assert "CsvParseError" in err and "line 6" in err
     assert not list(tmp_path.glob("*.h5")) and not list(tmp_path.glob(".o.h5*"))
+
+
+# ---------------------------------------------------------------- item 13: --quiet is quiet
+
+def test_ffmpeg_log_lines_do_not_reach_stderr_under_quiet(mds, tmp_path):
+    import subprocess
+    import sys
+
+    mp4 = sorted((mds / "clips").glob("*.mp4"))[0]
+    mp4.write_bytes(mp4.read_bytes()[:2000])  # truncated: FFmpeg logs "moov atom not found"
+    p = subprocess.run([sys.executable, "-m", "bsp_fast", "convert", "--quiet", "--clip-length",
+                        "10", "--crop-size", "16", str(mds), str(tmp_path / "o.h5")],
+                       capture_output=True, text=True, env={**os.environ}, timeout=120)
+    assert p.returncode == 1
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("bsp-convert: VideoDecodeError: "), p.stderr
+    assert str(mp4) in lines[0]

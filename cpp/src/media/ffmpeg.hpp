@@ -68,7 +68,10 @@ int av_check(int ret, const std::string& file, const std::string& what) {
 inline void quiet_logs() {
   static std::once_flag once;
   std::call_once(once, [] {
-    if (av_log_get_level() == AV_LOG_INFO) av_log_set_level(AV_LOG_ERROR);
+    // FFmpeg's own lines never reach stderr (bsp-convert --quiet must be quiet): every
+    // failure is reported by our exceptions, with av_strerror's text. A level someone set
+    // on purpose (not the library default) is left alone.
+    if (av_log_get_level() == AV_LOG_INFO) av_log_set_level(AV_LOG_QUIET);
   });
 }
 
