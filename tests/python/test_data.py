@@ -266,16 +266,30 @@ def test_balancing_a_split_without_one_class_leaves_it_empty(h5file):
     assert len(ds) == 0 and list(ds.loader(4)) == []
 
 
-def test_worker_ring_buffers_are_reused_across_many_batches(h5file):
+def test_worker_batches_travel_in_the_pre_fork_arena(h5file, monkeypatch):
     from bsp_fast.data import transport
 
+    monkeypatch.setattr(transport, "_mapped", {})
     ds = ClipDataset(h5file, "val", "autoencoder", noise=5.0, mjp=0.2)
-    loader = ds.loader(batch_size=1, num_workers=2)  # 12 batches per worker > RING_SLOTS
+    loader = ds.loader(batch_size=1, num_workers=2)  # 12 batches per worker > slots
     for _ in range(2):
         for batch in loader:
             ref = ds[batch["meta"]["index"].tolist()]
             assert all(torch.equal(batch[k], ref[k]) for k in ref if k != "meta")
-    assert 0 < len(transport._mapped) <= 2 * transport.RING_SLOTS
+            assert len(transport._arenas) >= 1
+    assert transport._mapped == {}  # no ring buffer, no file descriptor was passed
+    arena = next(iter(transport._arenas.values()))
+    assert arena.workers == 2 and arena.slots == 4
+    assert all(arena.slot(k)[0] == 0 for k in range(8))  # every slot handed back
+    del loader, batch
+    import gc
+
+    gc.collect()
+    assert not transport._arenas  # freed with the loader's iterator
+    # a slot too small for a batch: the per-worker ring takes over
+    monkeypatch.setattr(ClipDataset, "_packed_bytes", lambda self, b: 64)
+    seen = [i for b in ds.loader(batch_size=3, num_workers=1) for i in b["meta"]["index"].tolist()]
+    assert seen == list(range(len(ds))) and len(transport._mapped) > 0
 
 
 def test_packing_in_process_ring_and_one_off_buffers(monkeypatch):

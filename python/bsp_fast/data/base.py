@@ -26,6 +26,7 @@ torch = require("torch")
 import torch.utils.data  # noqa: E402
 
 from .sampling import ContiguousBatchSampler, IndexBatch, collate_batch, derived_seed
+from . import transport
 from .transport import pack_batch
 
 __all__ = ["SplitDataset", "SPLITS", "DEFAULT_EVAL_SEED"]
@@ -145,7 +146,7 @@ class SplitDataset(torch.utils.data.Dataset):
 
     def __getstate__(self):
         state = self.__dict__.copy()
-        state.update(_file=None, _pid=None, _ds={})
+        state.update(_file=None, _pid=None, _ds={}, _arena=None)
         return state
 
     def set_epoch(self, epoch: int) -> None:
@@ -174,6 +175,8 @@ class SplitDataset(torch.utils.data.Dataset):
         return [_sample(batch, i) for i in range(len(batch["meta"]["index"]))]
 
     def _batch(self, indices, pack: bool | None = None):
+        if torch.utils.data.get_worker_info() is not None:  # a DataLoader worker process
+            transport.tune_worker_malloc()
         pos = np.asarray(list(indices), np.int64)
         if pos.ndim != 1 or len(pos) == 0:
             raise ValueError(f"{type(self).__name__}: expected a non-empty list of indices")
@@ -193,8 +196,10 @@ class SplitDataset(torch.utils.data.Dataset):
         permute = {"inputs": _CHANNELS_FIRST[out["inputs"].ndim]} if channels_last else {}
         if pack is None:
             pack = isinstance(indices, IndexBatch)
-        if pack and torch.utils.data.get_worker_info() is not None:  # one shared buffer
-            return pack_batch(out, meta, strings, permute)
+        info = torch.utils.data.get_worker_info() if pack else None
+        if info is not None:  # leaving a worker: one shared buffer
+            return pack_batch(out, meta, strings, permute, getattr(self, "_arena", None),
+                              info.id)
         batch = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in out.items()}
         for k, order in permute.items():
             batch[k] = batch[k].permute(*order)
@@ -227,9 +232,48 @@ class SplitDataset(torch.utils.data.Dataset):
                                          rank=rank)
         kwargs.setdefault("persistent_workers", num_workers > 0)
         # the sampler yields whole batches: batch_size=None hands each to __getitem__
-        return torch.utils.data.DataLoader(self, sampler=sampler, batch_size=None,
-                                           collate_fn=collate_batch, num_workers=num_workers,
-                                           **kwargs)
+        return ClipLoader(self, sampler=sampler, batch_size=None, collate_fn=collate_batch,
+                          num_workers=num_workers, **kwargs)
+
+    def _packed_bytes(self, batch_size: int) -> int:
+        """Buffer bytes of a ``batch_size`` batch, from a one-clip batch read here."""
+        b = self._batch(IndexBatch([0]), pack=False)
+        tensors = [v for k, v in b.items() if k != "meta"]
+        tensors += [v for v in b["meta"].values() if isinstance(v, torch.Tensor)]
+        per_item = sum(t.numel() * t.element_size() for t in tensors)
+        return batch_size * per_item + 64 * len(tensors)
+
+
+class ClipLoader(torch.utils.data.DataLoader):
+    """The DataLoader of ``ds.loader()``: with forked workers it creates the batch buffers
+    (:class:`~bsp_fast.data.transport.Arena`) just before the workers start, so they
+    inherit them and no batch ever passes a file descriptor."""
+
+    def _get_iterator(self):
+        ds = self.dataset
+        batch = getattr(self.sampler, "batch_size", None)
+        if (self.num_workers == 0 or not isinstance(ds, SplitDataset) or not batch
+                or len(ds) == 0 or not _forks(self.multiprocessing_context)):
+            return super()._get_iterator()
+        slots = (self.prefetch_factor or 2) + 2  # queued + being filled + being copied out
+        arena = transport.Arena(self.num_workers, slots, ds._packed_bytes(batch))
+        ds._arena = arena  # inherited by the workers forked now
+        try:
+            it = super()._get_iterator()
+        finally:
+            ds._arena = None
+        arena.attach(it)
+        return it
+
+
+def _forks(context) -> bool:
+    import multiprocessing
+
+    if context is None:
+        return multiprocessing.get_start_method(allow_none=False) == "fork"
+    if isinstance(context, str):
+        return context == "fork"
+    return context.get_start_method() == "fork"
 
 
 _CHANNELS_FIRST = {5: (0, 1, 4, 2, 3), 4: (0, 3, 1, 2)}  # (B, [L,] S, S, 3) -> (B, [L,] 3, S, S)
