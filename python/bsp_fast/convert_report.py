@@ -82,7 +82,8 @@ def problems(report: dict) -> list:
 
 def format_report(r: dict) -> str:
     """A plain-text summary table of a conversion report (warnings first and last)."""
-    lines = [f"{'split':6s} {'clips':>7s} {'not-crossing':>13s} {'crossing':>9s} {'recordings':>11s}"]
+    lines = [f"{'split':6s} {'clips':>7s} {'not-crossing':>13s} {'crossing':>9s} "
+             f"{'recordings':>11s}"]
     for name in ("train", "val", "test"):
         s = r["splits"][name]
         lines.append(f"{name:6s} {s['clips']:7d} {s['not-crossing']:13d} {s['crossing']:9d} "
@@ -93,8 +94,9 @@ def format_report(r: dict) -> str:
     lines.append(f"rows {r['rows']}, recordings {r['recordings']}, skipped {len(r['skipped'])}, "
                  f"windows outside the image {r['clips_rejected_out_of_image']}, "
                  f"dropped by balancing {r['clips_dropped_by_balance']}")
-    lines.append(f"read {sec.get('read', 0):.2f} s ({rate:,.0f} rows/s, "
-                 f"{mb / max(sec.get('read', 1e-9), 1e-9):,.0f} MB/s), plan {sec.get('plan', 0):.2f} s, "
+    mb_s = mb / max(sec.get("read", 1e-9), 1e-9)
+    lines.append(f"read {sec.get('read', 0):.2f} s ({rate:,.0f} rows/s, {mb_s:,.0f} MB/s), "
+                 f"plan {sec.get('plan', 0):.2f} s, "
                  + (f"verify {sec['verify']:.2f} s, " if "verify" in sec else "")
                  + f"write {sec.get('write', 0):.2f} s, total {sec.get('total', 0):.2f} s")
     media = r.get("media", {})

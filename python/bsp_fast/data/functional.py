@@ -207,7 +207,8 @@ def denormalize_hips_neck_3d(points, shift, scale):
     scale = np.asarray(_to_numpy(scale)[0], np.float32)
     if shift.shape != p.shape[:-2] + (3,) or scale.shape != p.shape[:-2]:
         raise ValueError(f"shift must have shape {p.shape[:-2] + (3,)} and scale "
-                         f"{p.shape[:-2]} for points {p.shape}, got {shift.shape} and {scale.shape}")
+                         f"{p.shape[:-2]} for points {p.shape}, got {shift.shape} and "
+                         f"{scale.shape}")
     return back(_affine(p, shift, scale, inverse=True))
 
 
