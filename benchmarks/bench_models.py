@@ -89,7 +89,7 @@ def time_training(model, loader, steps: int, warmup: int, bf16: bool) -> dict:
             clips += len(batch["inputs"])
     total = wait + comp
     return {"clips_s": clips / total, "wait_share": wait / total, "step_s": total / steps,
-            "loss": float(loss)}
+            "loss": loss.item()}
 
 
 def speed_section(args, work: str) -> None:

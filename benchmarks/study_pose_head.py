@@ -6,8 +6,8 @@ random from the train split) and reports, on the val split, the mean error in cr
 pixels and PCK@0.05 (bounding-box diagonal) over visible joints, next to the mean crop
 skeleton. Used to pick the default head (docs/models.md).
 
-    PYTHONPATH=python python benchmarks/study_pose_head.py [--clips 16] [--steps 300]
-        [--width 16] [--frames 4] [--batch 8] [--threads 2] [--work DIR]
+    PYTHONPATH=python python benchmarks/study_pose_head.py [--clips 48] [--steps 600]
+        [--width 16] [--frames 2] [--batch 16] [--threads 2] [--work DIR]
 """
 from __future__ import annotations
 
@@ -57,11 +57,11 @@ def evaluate(model, data):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--clips", type=int, default=16, help="bsp-synth clips to render (16)")
-    ap.add_argument("--steps", type=int, default=300, help="training steps per head (300)")
+    ap.add_argument("--clips", type=int, default=48, help="bsp-synth clips to render (48)")
+    ap.add_argument("--steps", type=int, default=600, help="training steps per head (600)")
     ap.add_argument("--width", type=int, default=16, help="PoseCNN width (16)")
-    ap.add_argument("--frames", type=int, default=4, help="frames per training clip (4)")
-    ap.add_argument("--batch", type=int, default=8, help="clips per step (8)")
+    ap.add_argument("--frames", type=int, default=2, help="frames per training clip (2)")
+    ap.add_argument("--batch", type=int, default=16, help="clips per step (16)")
     ap.add_argument("--lr", type=float, default=1e-3, help="AdamW learning rate (1e-3)")
     ap.add_argument("--threads", type=int, default=2, help="torch threads (2)")
     ap.add_argument("--work", default="/tmp/bsp_pose_head", help="work directory")

@@ -110,6 +110,11 @@ PARAMS = {
     ("lifting", "lstm_relative_rot"): lstm_params(52, 64, 2) + 64 * 156 + 156,
     ("lifting", "poseformer"): (2 * 32 + 32) + 26 * 32 + 9 * 832 + 4 * block_params(32)
     + 4 * block_params(832) + 2 * 32 + 2 * 832 + (9 + 1) + 2 * 832 + 832 * 78 + 78,
+    # convolutions without bias + GroupNorm affine, Linear(8w*16 -> 256), BiGRU(256, 128),
+    # Linear(256 -> 52), w = 32
+    ("pose_estimation", "pose_cnn"): sum(9 * a * b + 2 * b for a, b in [
+        (3, 32), (32, 64), (64, 64), (64, 128), (128, 128), (128, 256), (256, 256)])
+    + (256 * 16 * 256 + 256) + 2 * (3 * 128 * (256 + 128) + 6 * 128) + 256 * 52 + 52,
 }
 
 
@@ -324,3 +329,25 @@ def test_trivial_baselines():
     crop.fit([{"targets": t, "visible": vis}])
     pred = crop(torch.zeros(3, 4, 3, 16, 16, dtype=torch.uint8))
     assert pred.shape == (3, 4, 26, 2) and (pred[..., 0, :] == 10.0).all()
+
+
+@pytest.mark.parametrize("task,name", ALL)
+def test_bf16_autocast_training_step(task, name):
+    """Every model runs under torch.autocast("cpu", bfloat16), also on CPUs without a bf16
+    LSTM kernel (LSTM layers fall back to float32); the loss is float32 and close."""
+    torch.manual_seed(0)
+    m = models.create(task, name, **SMALL.get(name, {}))
+    L = 9 if name == "poseformer" else 6
+    batch = fake_batch(task, name, 4, L)
+    m.eval()
+    with torch.no_grad():
+        ref = m.loss(m.forward_batch(batch), batch)
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            low = m.loss(m.forward_batch(batch), batch)
+    assert low.dtype == torch.float32
+    assert abs(low.item() - ref.item()) <= 0.05 * abs(ref.item()) + 1e-3
+    m.train()
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        loss = m.loss(m.forward_batch(batch), batch)
+    loss.backward()
+    assert all(torch.isfinite(p.grad).all() for p in m.parameters() if p.grad is not None)

@@ -41,7 +41,8 @@ class PoseCNN(PoseEstimationModel):
     pixels (x right, y down, origin at the crop's top-left corner).
 
     Backbone per frame: a stride-2 3x3 stem (``width`` channels) and three stages of
-    ``[3x3 stride 2, 3x3]`` convolutions with BatchNorm and ReLU (2, 4, 8 x ``width``
+    ``[3x3 stride 2, 3x3]`` convolutions with GroupNorm (``norm="batch"``: BatchNorm) and
+    ReLU (2, 4, 8 x ``width``
     channels; S/16 at the end). Heads:
 
     * ``regression`` (default): the last stage pooled to 4 x 4, flattened, ``Linear ->
