@@ -42,8 +42,7 @@ class PoseCNN(PoseEstimationModel):
 
     Backbone per frame: a stride-2 3x3 stem (``width`` channels) and three stages of
     ``[3x3 stride 2, 3x3]`` convolutions with GroupNorm (``norm="batch"``: BatchNorm) and
-    ReLU (2, 4, 8 x ``width``
-    channels; S/16 at the end). Heads:
+    ReLU (2, 4, 8 x ``width`` channels; S/16 at the end). Heads:
 
     * ``regression`` (default): the last stage pooled to 4 x 4, flattened, ``Linear ->
       hidden``; a bidirectional GRU over the clip's frames (residual) and ``Linear(hidden ->
