@@ -63,6 +63,8 @@ def test_summary_matches_the_full_mode(pair):
         {k: v for k, v in poses.items() if k not in drop}
 
 
+# Three short recordings: the converter rightly warns about its small splits.
+@pytest.mark.filterwarnings("ignore:bsp_fast.convert:UserWarning")
 def test_converts_without_media_into_pose_datasets(pair, tmp_path):
     import bsp_fast as bf
     from bsp_fast.data import ClipDataset
