@@ -12,7 +12,7 @@ timed.
         [--batch 256] [--clip-length 30] [--workers 2] [--models task/name,...]
         [--precision fp32,bf16] [--bf16-batch N] [--sections speed,fk,fit] [--h5 FILE]
 
-Per-model batch overrides (``--batch-override poseformer=32,pose_cnn=8``) keep the heavy
+Per-model batch overrides (``--batch-override poseformer=8,pose_cnn=8``) keep the heavy
 models to seconds per step; clips/s is per clip either way.
 """
 from __future__ import annotations
@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 TWO_D_NOISE = dict(noise=5.0, mjp=0.2944)
-DEFAULT_OVERRIDES = "poseformer=32,pose_cnn=8"
+DEFAULT_OVERRIDES = "poseformer=8,pose_cnn=8"
 
 
 def cpu_info() -> dict:
@@ -101,6 +101,8 @@ def speed_section(args, work: str) -> None:
         [(t, n) for t in models.TASKS for n in models.available(t)]
     precisions = args.precision.split(",")
     info = cpu_info()
+    if args.bf16_batch < 0:
+        args.bf16_batch = 0 if info["bf16_native"] else 32
     print(f"\n## Training speed (batch {args.batch}, L = {args.clip_length}, "
           f"{args.workers} loader workers, {args.steps} timed steps after {args.warmup})")
     print(f"CPU capability {info['capability']}, native bf16: {info['bf16_native'] or 'no'}, "
@@ -126,7 +128,8 @@ def speed_section(args, work: str) -> None:
                 bl = ds.loader(args.bf16_batch, num_workers=args.workers, drop_last=True,
                                sampler_seed=0)
                 r = time_training(model, bl, args.steps, args.warmup, True)
-                cells.append(f"{r['clips_s']:,.0f} (B={args.bf16_batch}) | {100 * r['wait_share']:.1f}")
+                cells.append(f"{r['clips_s']:,.0f} (B={args.bf16_batch}) | "
+                             f"{100 * r['wait_share']:.1f}")
                 del bl
             else:
                 r = time_training(model, loader, args.steps, args.warmup, bf16)
@@ -263,8 +266,10 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", type=int, default=256, help="clips per batch (256)")
     ap.add_argument("--batch-override", default=DEFAULT_OVERRIDES,
                     help=f"per-model batch sizes name=B,... ({DEFAULT_OVERRIDES})")
-    ap.add_argument("--bf16-batch", type=int, default=0,
-                    help="smaller batch for the bf16 runs (0: same as float32)")
+    ap.add_argument("--bf16-batch", type=int, default=-1,
+                    help="batch of the bf16 runs: 0 = as float32; -1 (default) = 32 on CPUs "
+                         "without native bf16 (emulated bf16 is several times slower), else "
+                         "as float32")
     ap.add_argument("--clip-length", type=int, default=30, help="frames per clip (30)")
     ap.add_argument("--workers", type=int, default=2, help="DataLoader workers (2)")
     ap.add_argument("--train-clips", type=int, default=1200, help="fixture train clips (1200)")
@@ -272,7 +277,7 @@ def main(argv=None) -> int:
                     help="fixture train clips with 128x128 crops (48)")
     ap.add_argument("--h5", default=None, help="use this converted file instead of a fixture")
     ap.add_argument("--fk-repeat", type=int, default=3, help="FK timing repeats (3)")
-    ap.add_argument("--fit-steps", type=int, default=60, help="steps of the bf16 fit (60)")
+    ap.add_argument("--fit-steps", type=int, default=40, help="steps of the bf16 fit (40)")
     ap.add_argument("--threads", type=int, default=0, help="torch threads (0: torch default)")
     args = ap.parse_args(argv)
     sys.stdout.reconfigure(line_buffering=True)
