@@ -1,4 +1,5 @@
-# make demo: install everything, generate a sample dataset, convert it.
+# make demo: install everything, generate a sample dataset, convert it, train a small
+# 2D->3D lifting model on it for a few epochs and print its results table.
 # make test: install everything, build, run the C++ (ctest) and Python (pytest) tests.
 SHELL := /bin/bash
 PY = $$(cat build/.python)
@@ -32,6 +33,10 @@ demo: install
 	$(PY) -m bsp_fast synth demo-out/dataset --preset sample --force
 	$(PY) -m bsp_fast convert demo-out/dataset demo-out/clips.h5 --verify --strict --force
 	$(PY) tools/h5_summary.py demo-out/clips.h5
+	$(PY) -m bsp_fast train lifting lstm --data demo-out/dataset --clip-length 16 \
+	    --clip-offset 4 --epochs 8 --batch-size 8 --lr 1e-3 --seed 1 --threads 1 \
+	    --out demo-out/runs/lifting-lstm --force --quiet
+	$(PY) -m bsp_fast eval --table demo-out/runs/lifting-lstm
 
 # The speed comparisons behind the README's tables (several minutes; not part of the tests).
 bench: install

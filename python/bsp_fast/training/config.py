@@ -48,7 +48,7 @@ OPTIONS: tuple = (
     _o("task", "str", None, "task: " + ", ".join(TASKS), "run", choices=TASKS),
     _o("model", "str", None, "registered model of the task (see the list below)", "run"),
     _o("data", "path", None, "CARLA-BSP dataset directory (converted on first use, cached "
-       "beside data.csv) or a bsp-convert HDF5 file", "run", metavar="DATASET_OR_H5"),
+       "in that directory) or a bsp-convert HDF5 file", "run", metavar="DATASET_OR_H5"),
     _o("out", "path", None, "run directory (default runs/TASK-MODEL-YYYYmmdd-HHMMSS); written "
        "under a temporary name and renamed when complete", "run", metavar="RUN_DIR"),
     _o("force", "flag", False, "replace an existing run directory", "run"),
@@ -99,6 +99,9 @@ OPTIONS: tuple = (
        "(0: never)", "training", minimum=0, metavar="EPOCHS"),
     _o("workers", "int", 0, "DataLoader worker processes per training process", "training",
        minimum=0),
+    _o("threads", "int", 0, "torch CPU threads per training process (0: torch's default, "
+       "the core count); 1 is often fastest for small models or on a busy machine",
+       "training", minimum=0, metavar="N"),
     _o("accelerator", "str", "auto", "where to train", "training", choices=ACCELERATORS),
     _o("devices", "devices", "auto", "number of devices (processes with DDP) or 'auto' or a "
        "comma-separated list of GPU indices", "training"),
@@ -349,9 +352,8 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         elif o.kind == "hp":
             g.add_argument(flag, action="append", default=S, metavar=o.metavar, help=text)
         else:
-            g.add_argument(flag, default=S, metavar=o.metavar or o.name.upper(),
-                           help=text + (f"; one of {', '.join(o.choices)}" if o.choices
-                                        and o.name != "task" else ""))
+            metavar = o.metavar or ("|".join(o.choices) if o.choices else o.name.upper())
+            g.add_argument(flag, default=S, metavar=metavar, help=text)
 
 
 def explicit_args(ns: argparse.Namespace) -> dict:

@@ -80,6 +80,10 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
     module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size, workers=workers,
                                      accelerator=accelerator, noise=noise, mjp=mjp,
                                      limit_batches=limit_batches, quiet=quiet)
+    if cfg["threads"]:
+        import torch
+
+        torch.set_num_threads(cfg["threads"])
     dm = make_datamodule(cfg, h5)
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
     precision = resolve_precision(cfg["precision"], cfg["accelerator"])

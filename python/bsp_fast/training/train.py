@@ -105,7 +105,8 @@ def make_datamodule(cfg: dict, h5=None):
                          balance=cfg["balance"], noise=cfg["noise"], mjp=cfg["mjp"],
                          batch_size=cfg["batch_size"], num_workers=cfg["workers"],
                          augment=augment, seed=cfg["seed"], sampler_seed=cfg["seed"],
-                         convert_options=convert, dataset_options=dataset_options)
+                         convert_options=convert, dataset_options=dataset_options,
+                         verbose=not cfg["quiet"] and _rank() == 0)
 
 
 def prepare_data(dm, stages=("fit", "test"), convert: bool = True) -> None:
@@ -235,6 +236,8 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
     from .tasks import TASK_MODULES
 
     child = bool(os.environ.get(ENV_TMP)) and _rank() > 0  # a DDP process Lightning started
+    if cfg["threads"]:
+        torch.set_num_threads(cfg["threads"])
     precision = resolve_precision(cfg["precision"], cfg["accelerator"])
     dm = make_datamodule(cfg)
     prepare_data(dm, convert=not child)
