@@ -6,7 +6,8 @@ import importlib
 __all__ = ["require"]
 
 EXTRAS = {"torch": "torch", "lightning": "torch", "torchmetrics": "torch",
-          "cv2": "preview", "matplotlib": "preview"}
+          "cv2": "preview", "matplotlib": "preview", "dask": "distributed",
+          "distributed": "distributed"}
 
 
 def require(module: str, needed_by: str = "bsp_fast.data"):
