@@ -1,13 +1,16 @@
 # make demo: install everything, generate a sample dataset, convert it, train a small
 # 2D->3D lifting model on it for a few epochs and print its results table.
 # make test: install everything, build, run the C++ (ctest) and Python (pytest) tests.
+# make test-asan / test-tsan / fuzz FUZZ_SECONDS=N: sanitizer builds and the fuzzers
+# (docs/security.md, "Fuzzing and sanitizers"), each in its own build directory.
 SHELL := /bin/bash
 PY = $$(cat build/.python)
 WERROR ?= OFF
 # C++ unit tests (doctest): off for a plain install, on for `make test`.
 TESTS ?= OFF
 
-.PHONY: all deps install test test-cpp test-python demo bench clean
+.PHONY: all deps install test test-cpp test-python demo bench clean \
+	fuzz fuzz-build test-asan test-asan-cpp test-tsan
 all: install
 
 deps:
@@ -30,6 +33,78 @@ test-cpp:
 
 test-python:
 	$(PY) -m pytest -q tests/python
+
+# ---------------------------------------------------------------- sanitizers and fuzzing
+# Builds in build/asan, build/tsan and build/fuzz with their own flags; build/wheel (the
+# installed module) is never touched. Configure once, then incremental like `install`.
+SAN_CMAKE = cmake -S . -DCMAKE_BUILD_TYPE=RelWithDebInfo -DBSP_WERROR=$(WERROR) \
+	-DPython_EXECUTABLE=$$(command -v $(PY))
+# Python tests that drive the C++ core (readers, converter, hostile inputs), run against
+# the ASan build of _core: python itself is not instrumented, so libasan is preloaded.
+ASAN_PYTESTS ?= tests/python/test_hostile.py tests/python/test_csv.py \
+	tests/python/test_media_apng.py tests/python/test_media_video.py \
+	tests/python/test_convert_media.py
+UBSAN_ENV = UBSAN_OPTIONS=print_stacktrace=1
+# (python's own allocations live until exit: no leak check there)
+PY_ASAN_ENV = $(UBSAN_ENV) ASAN_OPTIONS=detect_leaks=0 LD_PRELOAD=$$(gcc -print-file-name=libasan.so)
+# A small dataset with media for the converter-threads driver (tests/sanitize).
+san_dataset = $(PY) -m bsp_fast synth $(1) --clips 6 --frames 40 --size 96x64 --seed 7 \
+	--workers 1 --quiet --force
+
+test-asan: deps
+	$(SAN_CMAKE) -B build/asan -DBSP_SANITIZE=address,undefined -DBSP_TESTS=ON -DBSP_PYTHON=ON
+	cmake --build build/asan -j2
+	$(UBSAN_ENV) ctest --test-dir build/asan --output-on-failure --no-tests=error -j2
+	@rm -rf build/asan/convert-out
+	$(call san_dataset,build/asan/convert.dataset)
+	$(UBSAN_ENV) build/asan/bsp_convert_threads build/asan/convert.dataset build/asan/convert-out 3
+	$(PY_ASAN_ENV) PYTHONPATH=build/asan/py:python $(PY) -m pytest -q -p no:cacheprovider $(ASAN_PYTESTS)
+
+# The ASan ctest only (CI: the Python half runs in `make test` without a sanitizer).
+test-asan-cpp: deps
+	$(SAN_CMAKE) -B build/asan -DBSP_SANITIZE=address,undefined -DBSP_TESTS=ON -DBSP_PYTHON=OFF
+	cmake --build build/asan -j2
+	$(UBSAN_ENV) ctest --test-dir build/asan --output-on-failure --no-tests=error -j2
+
+# ThreadSanitizer: the C++ tests (the threaded ones: parallel_for, the CSV reader's row
+# blocks, the APNG decode-ahead and video converter threads) and the converter's workers
+# and cancellation on a real dataset.
+TSAN_ENV = TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1
+test-tsan: deps
+	$(SAN_CMAKE) -B build/tsan -DBSP_SANITIZE=thread -DBSP_TESTS=ON -DBSP_PYTHON=OFF
+	cmake --build build/tsan -j2
+	$(TSAN_ENV) ctest --test-dir build/tsan --output-on-failure --no-tests=error -j2
+	@rm -rf build/tsan/convert-out
+	$(call san_dataset,build/tsan/convert.dataset)
+	$(TSAN_ENV) build/tsan/bsp_convert_threads build/tsan/convert.dataset build/tsan/convert-out 3
+
+# libFuzzer harnesses (tests/fuzz): clang, -fsanitize=fuzzer,address,undefined. Each runs
+# FUZZ_SECONDS from its committed seeds (tests/fuzz/corpus/<name>) plus what earlier runs
+# found (build/fuzz/corpus/<name>); a crash stops make and leaves its input in
+# build/fuzz/crashes/.
+FUZZ_SECONDS ?= 60
+FUZZ_HARNESSES = csv apng video
+FUZZ_FLAGS ?= -rss_limit_mb=2048 -timeout=25 -print_final_stats=1
+fuzz-build: deps
+	@bash tools/install-fuzz-deps.sh
+	$(SAN_CMAKE) -B build/fuzz -DCMAKE_C_COMPILER=clang-14 -DCMAKE_CXX_COMPILER=clang++-14 \
+	    -DBSP_SANITIZE=address,undefined -DBSP_FUZZ=ON -DBSP_TESTS=OFF -DBSP_PYTHON=OFF
+	cmake --build build/fuzz -j2 --target $(addprefix fuzz_,$(FUZZ_HARNESSES))
+
+fuzz: fuzz-build
+	@mkdir -p build/fuzz/crashes
+	@for h in $(FUZZ_HARNESSES); do \
+	  mkdir -p build/fuzz/corpus/$$h; \
+	  echo "fuzz_$$h: $(FUZZ_SECONDS) s (log: build/fuzz/$$h.log)"; \
+	  ASAN_OPTIONS=detect_leaks=1 $(UBSAN_ENV) \
+	  build/fuzz/fuzz_$$h build/fuzz/corpus/$$h tests/fuzz/corpus/$$h \
+	    -max_total_time=$(FUZZ_SECONDS) $(FUZZ_FLAGS) \
+	    -artifact_prefix=build/fuzz/crashes/$$h- > build/fuzz/$$h.log 2>&1; rc=$$?; \
+	  grep -E '^#[0-9]+ +(INITED|DONE)|^stat::(number_of_executed_units|average_exec_per_sec|peak_rss)' \
+	    build/fuzz/$$h.log; \
+	  if [ $$rc -ne 0 ]; then tail -n 60 build/fuzz/$$h.log; \
+	    echo "fuzz_$$h failed (exit $$rc): input in build/fuzz/crashes/"; exit 1; fi; \
+	done
 
 demo: install
 	$(PY) -m bsp_fast synth demo-out/dataset --preset sample --force
