@@ -27,6 +27,7 @@ from pathlib import Path
 
 from ._native import core as _core
 from .convert_inputs import BadDataset, _dataset_csv, _dataset_fov, _refuse_inputs_as_output
+from ._dask import SCHEDULER_HELP, open_client, parse_scheduler
 from .convert_report import ProgressBars, format_report, problems, verify_table
 
 __all__ = ["convert", "conversion_settings", "main", "format_report", "frame_media",
@@ -133,7 +134,7 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
             fov=None, min_video_length=None, label="last", benchmark=False, val_frac=0.2,
             test_frac=0.2, seed=22742, balance=False, threads=None, verify=False,
             compress=False, media=True, crop_size=128, skip_bad_media=False, force=False,
-            progress=None, strict=False) -> dict:
+            progress=None, strict=False, client=None, shards=None) -> dict:
     """Converts a CARLA-BSP dataset into train/val/test clips in one HDF5 file.
 
     ``dataset`` is the dataset directory (or its data.csv). ``clip_length`` defaults to 30
@@ -165,6 +166,11 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
     and why, seconds per stage, ``media`` (frames per split, seconds, crops_per_second,
     bad files and why), ``warnings``, ``settings`` and, with ``verify``, the verification
     table.
+
+    ``client`` (a ``distributed.Client``) converts on a Dask cluster instead: ``shards``
+    tasks (default: one per worker thread), each writing part of the output into the folder
+    ``<out_path>.shards``, and ``out_path`` made of HDF5 virtual datasets over them, equal
+    value for value to the one-process output (docs/distributed.md).
     """
     root, csv = _dataset_csv(dataset)
     out = Path(out_path)
@@ -178,6 +184,7 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
         balance=balance, compress=compress, media=media, crop_size=crop_size,
         skip_bad_media=skip_bad_media)
     _positive("threads", threads)
+    _positive("shards", shards)
     if progress is None:
         progress = _is_terminal(sys.stderr)
     st = settings
@@ -191,6 +198,15 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
                    source_path=str(root.resolve()),
                    extra_attrs={"settings_json": json.dumps(settings, sort_keys=True)})
     out.parent.mkdir(parents=True, exist_ok=True)
+    if client is not None:
+        from .convert_dask import convert_sharded
+
+        report = convert_sharded(str(csv), out, options, client, shards=shards, strict=strict,
+                                 root=root)
+        report["settings"] = settings
+        for w in report["warnings"]:
+            warnings.warn(f"bsp_fast.convert: {w} ({out})", UserWarning, stacklevel=2)
+        return report
     tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")
     try:
         report = _run(str(csv), str(tmp), options, progress)
@@ -308,6 +324,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--balance", action="store_true",
                    help="balance the train split's classes (keep min class count of each)")
     p.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
+    p.add_argument("--scheduler", default="threads", metavar="threads|dask|dask:ADDRESS",
+                   help="where to convert: " + SCHEDULER_HELP + "; with dask, OUT is made of "
+                        "virtual datasets over the folder OUT.shards, which must stay next to "
+                        "it (docs/distributed.md)")
+    p.add_argument("--shards", type=int, default=None, metavar="N",
+                   help="with --scheduler dask: tasks (default: one per worker thread); the "
+                        "output does not depend on it")
     p.add_argument("--compress", action="store_true",
                    help="shuffle+deflate the large target arrays and the RGB crops (smaller, "
                         "slower to read); the masks are always deflated")
@@ -357,6 +380,25 @@ def main(argv=None) -> int:
 
 def _main(args) -> int:
     try:
+        address = parse_scheduler(args.scheduler)
+    except ValueError as exc:
+        print(f"bsp-convert: {exc}", file=sys.stderr)
+        return 2
+    if address is None:
+        if args.shards is not None:
+            print("bsp-convert: --shards needs --scheduler dask", file=sys.stderr)
+            return 2
+        return _convert_cli(args, None)
+    try:
+        with open_client(address, needed_by="bsp-convert --scheduler dask") as client:
+            return _convert_cli(args, client)
+    except (ImportError, OSError) as exc:
+        print(f"bsp-convert: {exc}", file=sys.stderr)
+        return 1
+
+
+def _convert_cli(args, client) -> int:
+    try:
         with warnings.catch_warnings():  # printed below, once, in the summary
             warnings.simplefilter("ignore", UserWarning)
             report = convert(
@@ -367,7 +409,8 @@ def _main(args) -> int:
                 seed=args.seed, balance=args.balance, threads=args.threads, verify=args.verify,
                 compress=args.compress, media=not args.no_media, crop_size=args.crop_size,
                 skip_bad_media=args.skip_bad_media, force=args.force,
-                progress=False if args.quiet else None, strict=args.strict)
+                progress=False if args.quiet else None, strict=args.strict, client=client,
+                shards=args.shards)
     except FileExistsError as exc:
         print(f"bsp-convert: {exc}", file=sys.stderr)
         return 3

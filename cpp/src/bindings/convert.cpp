@@ -37,6 +37,14 @@ py::dict report_dict(const ConvertReport& r) {
   media["bad"] = bad;
   media["passes"] = r.media.passes;
   d["media"] = media;
+  py::list failures;
+  for (const ShardFailure& f : r.shard_failures)
+    failures.append(py::dict(py::arg("phase") = f.phase, py::arg("order") = f.order,
+                             py::arg("recording") = py::make_tuple(f.recording.id, f.recording.camera_idx,
+                                                                   f.recording.pedestrian_idx),
+                             py::arg("path") = f.recording.path, py::arg("reason") = f.recording.reason,
+                             py::arg("kind") = f.kind));
+  d["shard_failures"] = failures;
   return d;
 }
 
@@ -63,6 +71,12 @@ py::dict convert(const std::string& csv, const std::string& out, ConvertProgress
   o.media.mask_level = take(d, "media_mask_level", o.media.mask_level);
   o.media.chunk_frames = take(d, "media_chunk_frames", o.media.chunk_frames);
   o.extra_attrs = take(d, "extra_attrs", o.extra_attrs);
+  o.shard.count = take(d, "shard_count", o.shard.count);
+  o.shard.index = take(d, "shard_index", o.shard.index);
+  // (id, camera_idx, pedestrian_idx, path, reason) of recordings to plan without
+  using Left = std::tuple<std::string, std::int64_t, std::int64_t, std::string, std::string>;
+  for (const Left& x : take(d, "exclude", std::vector<Left>{}))
+    o.shard.exclude.push_back({std::get<0>(x), std::get<1>(x), std::get<2>(x), std::get<3>(x), std::get<4>(x)});
   no_leftovers(d);
   ConvertReport r;
   {

@@ -226,14 +226,18 @@ void exclude(const Plan& plan, const std::vector<detail::MediaFailure>& failures
 
 // Writes the whole file. Returns the recordings whose media failed while decoding (only
 // with skip_bad_media); the file is then incomplete and the caller converts again.
+// `clips`: the clips of each split to write (a shard's part; all of them otherwise);
+// `keep_failures`: media failures come back even without skip_bad_media (shards).
+using SplitClips = std::array<const std::vector<Clip>*, 3>;
 std::vector<detail::MediaFailure> write_output(const std::string& out_path, const PoseTable& table,
-                                               const Plan& plan, const MediaPlan* media,
-                                               const ConvertOptions& opt, ConvertReport& report,
-                                               ConvertProgress* progress) {
+                                               const Plan& plan, const SplitClips& clips,
+                                               const MediaPlan* media, const ConvertOptions& opt,
+                                               ConvertReport& report, ConvertProgress* progress,
+                                               bool keep_failures = false) {
   auto t0 = Clock::now();
   if (progress) {
     progress->done = 0;
-    progress->total = report.clips[0] + report.clips[1] + report.clips[2];
+    progress->total = clips[0]->size() + clips[1]->size() + clips[2]->size();
     progress->stage = 3;
   }
   h5::File file = h5::File::create(out_path);
@@ -246,7 +250,8 @@ std::vector<detail::MediaFailure> write_output(const std::string& out_path, cons
     g.attr("class_counts", std::vector<std::int64_t>{static_cast<std::int64_t>(report.class_counts[s][0]),
                                                      static_cast<std::int64_t>(report.class_counts[s][1])});
     g.attr("recordings", static_cast<std::int64_t>(report.recordings_per_split[s]));
-    detail::write_split(g, table, plan, plan.splits[s], opt.clips.length, opt, progress);
+    detail::write_split(g, table, plan, *clips[static_cast<std::size_t>(s)], opt.clips.length, opt,
+                        progress);
   }
   report.seconds["write"] = since(t0);
   std::vector<detail::MediaFailure> failed;
@@ -257,8 +262,10 @@ std::vector<detail::MediaFailure> write_output(const std::string& out_path, cons
       progress->total = media->tables[0].frames() + media->tables[1].frames() + media->tables[2].frames();
       progress->stage = 6;
     }
+    ConvertOptions mo = opt;
+    mo.media.skip_bad_media = opt.media.skip_bad_media || keep_failures;
     failed = detail::write_media(std::array<const h5::Group*, 3>{&groups[0], &groups[1], &groups[2]},
-                                 table, media->tables, media->files, opt, progress);
+                                 table, media->tables, media->files, mo, progress);
     report.seconds["media"] = since(t0);
   }
   file.close();
@@ -290,6 +297,76 @@ void verify(const PoseTable& table, const Plan& plan, const ConvertOptions& opt,
   report.seconds["verify"] = since(t0);
 }
 
+LeftOutRecording left_out(const PoseTable& t, const Plan& plan, const detail::MediaFailure& f) {
+  const Recording& rec = plan.recordings[f.recording];
+  return {t.id.values[static_cast<std::size_t>(rec.id_code)], rec.camera_idx, rec.pedestrian_idx,
+          f.path, f.reason};
+}
+
+// Shard opt.shard.index of opt.shard.count (ShardOptions): the plan of the whole dataset,
+// this shard's part of it written to out_path; media failures returned, not thrown (the
+// file is then incomplete and the caller discards it).
+ConvertReport convert_shard(const std::string& csv_path, const std::string& out_path,
+                            const PoseTable& table, ConvertReport report,
+                            const std::set<RecordingKey>& excluded, const ConvertOptions& opt,
+                            ConvertProgress* progress) {
+  auto t0 = Clock::now();
+  const Plan plan = plan_excluding(table, opt.clips, excluded);
+  fill_report(report, table, plan);
+  report.seconds["plan"] = since(t0);
+  const int L = opt.clips.length;
+  std::array<detail::FrameTable, 3> full;
+  MediaPlan media;
+  if (opt.media.enabled) {
+    media.files = detail::media_files(table, plan, media_root(csv_path));  // unsafe paths first
+    for (int s = 0; s < 3; ++s) full[s] = detail::plan_frame_table(plan, plan.splits[s], L);
+  }
+  const detail::ShardParts parts = detail::shard_parts(plan, full, L, opt.shard.index, opt.shard.count);
+  std::array<std::vector<Clip>, 3> clips;
+  for (std::size_t s = 0; s < 3; ++s) {
+    const auto [c0, c1] = parts.clips[s];
+    clips[s].assign(plan.splits[s].begin() + static_cast<std::ptrdiff_t>(c0),
+                    plan.splits[s].begin() + static_cast<std::ptrdiff_t>(c1));
+    if (opt.media.enabled) media.tables[s] = detail::slice_table(full[s], parts.blocks[s], parts.clips[s], L);
+  }
+  if (opt.media.enabled) {
+    t0 = Clock::now();
+    auto failed = detail::check_media(table, media.tables, media.files, opt.threads, progress);
+    report.media.check_seconds = since(t0);
+    for (const auto& f : failed)
+      report.shard_failures.push_back({0, f.recording, left_out(table, plan, f), detail::error_kind(f.error)});
+    if (!failed.empty()) return report;
+  }
+  check_cancel(progress);
+  if (opt.verify && opt.shard.index == 0) verify(table, plan, opt, report, progress);
+  const SplitClips mine = {&clips[0], &clips[1], &clips[2]};
+  auto failed = write_output(out_path, table, plan, mine, opt.media.enabled ? &media : nullptr, opt,
+                             report, progress, /*keep_failures=*/true);
+  for (const auto& f : failed) {
+    std::uint64_t order = 0;  // split << 32 | block in the whole split's table
+    for (std::size_t s = 0; s < 3; ++s) {
+      const auto& recs = media.tables[s].recordings;
+      const auto it = std::find(recs.begin(), recs.end(), f.recording);
+      if (it != recs.end())
+        order = (std::uint64_t{s} << 32) |
+                (parts.blocks[s].first + static_cast<std::uint64_t>(it - recs.begin()));
+    }
+    report.shard_failures.push_back({1, order, left_out(table, plan, f), detail::error_kind(f.error)});
+  }
+  for (std::size_t s = 0; s < 3; ++s) report.media.frames[s] = media.tables[s].frames();
+  report.media.seconds = report.media.check_seconds + (opt.media.enabled ? report.seconds["media"] : 0.0);
+  report.media.passes = 1;
+  if (progress) progress->stage = 4;
+  return report;
+}
+
+RecordingKey key_of(const PoseTable& t, const LeftOutRecording& r) {
+  const auto& ids = t.id.values;
+  const auto it = std::find(ids.begin(), ids.end(), r.id);
+  if (it == ids.end()) throw std::invalid_argument("recording to leave out not in data.csv: " + r.id);
+  return {static_cast<std::int32_t>(it - ids.begin()), r.camera_idx, r.pedestrian_idx};
+}
+
 }  // namespace
 
 void check_cancel(const ConvertProgress* p) {
@@ -313,6 +390,14 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
 
   std::set<RecordingKey> excluded;
   std::vector<BadMedia> bad;
+  for (const LeftOutRecording& r : opt.shard.exclude) {
+    excluded.insert(key_of(table, r));
+    bad.push_back({r.path, r.reason});
+  }
+  if (opt.shard.count > 0) {
+    base.media.bad = bad;
+    return convert_shard(csv_path, out_path, table, base, excluded, opt, progress);
+  }
   double check_seconds = 0;
   for (int writes = 1;;) {
     check_cancel(progress);
@@ -335,8 +420,9 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
     if (opt.verify) verify(table, plan, opt, report, progress);
     check_cancel(progress);
     report.media.bad = bad;
-    auto failed = write_output(out_path, table, plan, opt.media.enabled ? &media : nullptr, opt,
-                               report, progress);
+    const SplitClips all = {&plan.splits[0], &plan.splits[1], &plan.splits[2]};
+    auto failed = write_output(out_path, table, plan, all, opt.media.enabled ? &media : nullptr,
+                               opt, report, progress);
     if (!failed.empty()) {
       exclude(plan, failed, excluded, bad);
       ++writes;

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <exception>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "bsp/clips/clips.hpp"
@@ -95,5 +96,20 @@ std::vector<MediaFailure> write_media(const std::array<const h5::Group*, 3>& gro
                                       const PoseTable& t, const std::array<FrameTable, 3>& tables,
                                       const std::vector<MediaFiles>& files,
                                       const ConvertOptions& opt, ConvertProgress* progress);
+
+// ---- Shards (shard.cpp) ----------------------------------------------------------------
+
+// What shard `index` of `count` writes: per split, clips [first, second) and frame-table
+// blocks [first, second).
+struct ShardParts {
+  std::array<std::pair<std::size_t, std::size_t>, 3> clips, blocks;
+};
+ShardParts shard_parts(const Plan& plan, const std::array<FrameTable, 3>& tables, int L,
+                       int index, int count);
+// The blocks and the clips' clip_frames (still numbered in the whole table) of one shard.
+FrameTable slice_table(const FrameTable& full, std::pair<std::size_t, std::size_t> blocks,
+                       std::pair<std::size_t, std::size_t> clips, int L);
+// The Python class name of the exception in `e` (bsp_fast.<name> or a builtin).
+std::string error_kind(const std::exception_ptr& e);
 
 }  // namespace bsp::detail

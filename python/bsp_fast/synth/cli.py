@@ -44,6 +44,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "same seed gives byte-identical output for any --workers")
     p.add_argument("--workers", type=int, metavar="N", help="worker processes, one clip each "
                    "at a time (default: CPU count)")
+    p.add_argument("--scheduler", default="threads", metavar="threads|dask|dask:ADDRESS",
+                   help="threads: --workers local processes (default); dask: a local Dask "
+                        "cluster, one worker process per core; dask:ADDRESS: an existing Dask "
+                        "scheduler (OUT_DIR on a filesystem the workers share). One task per "
+                        "clip; the output is byte-identical")
     p.add_argument("--config", metavar="cfg.yaml", help="YAML with the original generator's "
                    "keys: number_of_clips, clip_length_in_frames, pedestrian_distributions "
                    "([[age, gender, [walk mean, std], [cross mean, std]], weight] or "
@@ -80,6 +85,24 @@ def _print_summary(s: dict) -> None:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    from .._dask import open_client, parse_scheduler
+
+    try:
+        address = parse_scheduler(args.scheduler)
+    except ValueError as e:
+        print(f"bsp-synth: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    if address is None:
+        return _generate(args, None)
+    try:
+        with open_client(address, needed_by="bsp-synth --scheduler dask") as client:
+            return _generate(args, client)
+    except (ImportError, OSError) as e:
+        print(f"bsp-synth: {e}", file=sys.stderr)
+        return EXIT_ERROR
+
+
+def _generate(args, client) -> int:
     from .. import Error
     from .generate import generate
 
@@ -89,7 +112,7 @@ def main(argv=None) -> int:
                            config=args.config, motion=args.motion,
                            apng_drop_duplicates=args.apng_drop_duplicates,
                            poses_only=args.poses_only, force=args.force,
-                           progress=not args.quiet)
+                           progress=not args.quiet, client=client)
     except FileExistsError as e:
         print(f"bsp-synth: {e}", file=sys.stderr)
         return EXIT_EXISTS

@@ -105,7 +105,7 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
              frames: int | None = None, size=None, fov: float | None = None,
              seed: int | None = None, workers: int | None = None, config=None, motion=None,
              apng_drop_duplicates: bool = False, poses_only: bool = False,
-             force: bool = False, progress: bool = True) -> dict:
+             force: bool = False, progress: bool = True, client=None) -> dict:
     """Generates a CARLA-BSP-format dataset under ``out_dir`` and returns a summary dict.
 
     preset: ``sample`` (20 clips x 150 frames, 640x240), ``medium`` or ``full`` (396 x 900,
@@ -125,6 +125,9 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
         on the annotated frames to decide ``in_segmentation`` exactly; the video and
         segmentation encoders, nearly all of the time, are skipped.
     force: replace an existing ``out_dir``.
+    client: a ``distributed.Client``: one Dask task per clip instead of worker processes
+        (``workers`` is then ignored); ``out_dir`` must be on a filesystem the workers share.
+        The output is byte-identical (docs/distributed.md).
 
     Summary keys: out_dir, clips, frames, annotated_frames, annotated_share,
     crossing_frames, crossing_share, crossing_clips, per_profile {name: {clips,
@@ -157,7 +160,7 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
         if not cfg.poses_only:
             os.makedirs(os.path.join(tmp, "clips"))
         os.makedirs(os.path.join(tmp, PARTS))
-        stats = _run_clips(cfg, tmp, workers, progress)
+        stats = _run_clips(cfg, tmp, workers, progress, client)
         _write_config(cfg, tmp, __version__)
         shutil.rmtree(os.path.join(tmp, PARTS))
         if os.path.exists(out_dir):
@@ -176,7 +179,14 @@ def _write_config(cfg: SynthConfig, root: str, version: str) -> None:
         yaml.safe_dump(cfg.to_yaml_dict(version), fh, sort_keys=False)
 
 
-def _run_clips(cfg: SynthConfig, root: str, workers: int, progress: bool) -> list:
+def _dask_clip_job(cfg: SynthConfig, index: int, root: str) -> dict:
+    from .._dask import test_hook
+
+    test_hook("clip", index)
+    return _clip_job(cfg, index, root, 1)
+
+
+def _run_clips(cfg: SynthConfig, root: str, workers: int, progress: bool, client=None) -> list:
     """Runs every clip and appends its rows to data.csv in clip order as they complete."""
     from tqdm.auto import tqdm
 
@@ -191,7 +201,24 @@ def _run_clips(cfg: SynthConfig, root: str, workers: int, progress: bool) -> lis
                 _append_part(out, os.path.join(root, PARTS, f"{i:06d}.csv"), header=i == 0)
                 stats.append(done.pop(i))
 
-        if workers == 1:
+        if client is not None:
+            import uuid
+
+            from distributed import as_completed
+
+            token = uuid.uuid4().hex
+            futures = [client.submit(_dask_clip_job, cfg, i, root, pure=False,
+                                     key=f"bsp-synth-clip-{i}-{token}") for i in range(n)]
+            try:
+                for fut in as_completed(futures):
+                    s = fut.result()
+                    done[s["index"]] = s
+                    flush()
+                    bar.update(1)
+            except BaseException:
+                client.cancel(futures)
+                raise
+        elif workers == 1:
             for i in range(n):
                 done[i] = _clip_job(cfg, i, root, 0)  # one process: threads inside C++
                 flush()

@@ -25,8 +25,27 @@ struct MediaOptions {
   int chunk_frames = 16;        // frames per chunk of frames/mask and uncompressed frames/rgb
 };
 
+// A recording left out before planning (a media failure found by an earlier pass).
+struct LeftOutRecording {
+  std::string id;  // the CSV's id column
+  std::int64_t camera_idx = 0, pedestrian_idx = 0;
+  std::string path, reason;  // the bad file, as reported (BadMedia)
+};
+
+// One shard of a distributed conversion (docs/distributed.md). Every shard plans the whole
+// dataset exactly as convert_csv does, then writes only its part: clips [N*k/K, N*(k+1)/K)
+// of each split and the frame-table blocks (whole recordings) of its contiguous range of
+// the table, so concatenating the shards along the first axis gives the one-file output.
+// Media failures are not thrown but returned in ConvertReport::shard_failures.
+struct ShardOptions {
+  int count = 0;  // K; 0 = not sharded
+  int index = 0;  // k in [0, K)
+  std::vector<LeftOutRecording> exclude;  // planned without these (also when not sharded)
+};
+
 struct ConvertOptions {
   ClipOptions clips;
+  ShardOptions shard;
   MediaOptions media;
   double fov = 90.0;         // horizontal FOV of the camera (not stored in the CSV)
   int threads = 0;           // 0 = all cores
@@ -72,6 +91,16 @@ struct MediaReport {
   int passes = 0;  // times the file was written: > 1 when a file failed mid-decode (skipped)
 };
 
+// A media failure of a shard: phase 0 = found while opening the files (order: plan
+// recording index), 1 = while decoding (order: split << 32 | table block), which is the
+// order in which the unsharded converter meets them. `kind` is the exception's class name.
+struct ShardFailure {
+  int phase = 0;
+  std::uint64_t order = 0;
+  LeftOutRecording recording;
+  std::string kind;
+};
+
 struct ConvertReport {
   std::size_t rows = 0, recordings = 0;
   std::array<std::size_t, 3> clips{}, recordings_per_split{};
@@ -84,6 +113,7 @@ struct ConvertReport {
   std::vector<VerifyRow> verify;         // every recording, when verify is on
   std::vector<std::string> verify_failed;  // recordings beyond tolerance
   MediaReport media;
+  std::vector<ShardFailure> shard_failures;  // sharded only
 };
 
 // Throws bsp::Error naming the CSV line/column and the path for an absolute media path, one

@@ -1,0 +1,88 @@
+"""Dask plumbing shared by ``bsp-convert`` and ``bsp-synth`` ``--scheduler dask[:ADDRESS]``.
+
+``dask`` and ``distributed`` are the optional ``distributed`` extra
+(``pip install 'bsp_fast[distributed]'``); nothing here imports them before a Dask
+scheduler is asked for. See docs/distributed.md.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+
+from ._extras import require
+
+__all__ = ["parse_scheduler", "open_client", "worker_threads", "test_hook"]
+
+SCHEDULER_HELP = ("threads (default: this process, C++ threads), dask (a local Dask cluster "
+                  "with one single-threaded worker process per core) or dask:ADDRESS (an "
+                  "existing Dask scheduler, e.g. dask:tcp://10.0.0.5:8786; the output and "
+                  "the dataset must be on a filesystem every worker sees)")
+
+
+def parse_scheduler(text: str):
+    """``'threads'`` -> None; ``'dask'`` -> ``''`` (a LocalCluster);
+    ``'dask:ADDRESS'`` -> ``'ADDRESS'``. Raises ValueError for anything else."""
+    if text == "threads":
+        return None
+    if text == "dask":
+        return ""
+    if isinstance(text, str) and text.startswith("dask:") and len(text) > 5:
+        return text[5:]
+    raise ValueError(f"scheduler must be 'threads', 'dask' or 'dask:ADDRESS', got {text!r}")
+
+
+@contextlib.contextmanager
+def open_client(address: str, n_workers: int | None = None, needed_by: str = "bsp_fast"):
+    """A ``distributed.Client``: connected to ``address``, or (empty address) to a new
+    ``LocalCluster`` of ``n_workers`` (default: one per core) single-threaded worker
+    processes, closed on exit."""
+    distributed = require("distributed", needed_by)
+    if address:
+        client = distributed.Client(address)
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    n = n_workers or os.cpu_count() or 1
+    with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        yield client
+
+
+def worker_threads(default: int = 1) -> int:
+    """Threads of the Dask worker running the calling task (``default`` outside one)."""
+    try:
+        from distributed import get_worker
+
+        w = get_worker()
+    except (ImportError, ValueError):
+        return default
+    n = getattr(w, "nthreads", None) or getattr(getattr(w, "state", None), "nthreads", None)
+    return int(n or default)
+
+
+def test_hook(task: str, index: int) -> None:
+    """Fault injection for the tests (environment variable ``BSP_FAST_TEST_DASK_HOOK``):
+
+    * ``kill:TASK:INDEX:MARKER``: the first attempt of task ``TASK`` (``shard`` or ``clip``)
+      number ``INDEX`` creates the file ``MARKER`` and ends its worker process with
+      ``os._exit`` (the next attempt finds the marker and runs normally);
+    * ``sleep:TASK:SECONDS``: every such task sleeps first (to interrupt a run).
+    """
+    spec = os.environ.get("BSP_FAST_TEST_DASK_HOOK", "")
+    if not spec:
+        return
+    parts = spec.split(":", 3)
+    if parts[0] == "kill" and len(parts) == 4 and parts[1] == task and int(parts[2]) == index:
+        try:
+            fd = os.open(parts[3], os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            return
+        os.close(fd)
+        os._exit(17)
+    if parts[0] == "sleep" and len(parts) == 3 and parts[1] == task:
+        import time
+
+        time.sleep(float(parts[2]))
