@@ -7,7 +7,7 @@ pixels and PCK@0.05 (bounding-box diagonal) over visible joints, next to the mea
 skeleton. Used to pick the default head (docs/models.md).
 
     PYTHONPATH=python python benchmarks/study_pose_head.py [--clips 48] [--steps 600]
-        [--width 16] [--frames 2] [--batch 16] [--threads 2] [--work DIR]
+        [--width 16] [--frames 16] [--batch 2] [--threads 2] [--work DIR]
 """
 from __future__ import annotations
 
@@ -60,8 +60,9 @@ def main(argv=None) -> int:
     ap.add_argument("--clips", type=int, default=48, help="bsp-synth clips to render (48)")
     ap.add_argument("--steps", type=int, default=600, help="training steps per head (600)")
     ap.add_argument("--width", type=int, default=16, help="PoseCNN width (16)")
-    ap.add_argument("--frames", type=int, default=2, help="frames per training clip (2)")
-    ap.add_argument("--batch", type=int, default=16, help="clips per step (16)")
+    ap.add_argument("--frames", type=int, default=16,
+                    help="frames per training clip, cut at random (16: whole clips, as evaluated)")
+    ap.add_argument("--batch", type=int, default=2, help="clips per step (2)")
     ap.add_argument("--lr", type=float, default=1e-3, help="AdamW learning rate (1e-3)")
     ap.add_argument("--threads", type=int, default=2, help="torch threads (2)")
     ap.add_argument("--work", default="/tmp/bsp_pose_head", help="work directory")
