@@ -52,10 +52,31 @@ def test_tables_resolve_to_bsp_train_configs(table, tmp_path):
     cfgs = sorted((tmp_path / "runs" / f"{table}-quick" / "configs").glob("*.yaml"))
     trained = [r["name"] for r in tab["rows"] if not r.get("initial_of")]
     assert [p.stem for p in cfgs] == sorted(trained)
+    rows = {r["name"]: r for r in tab["rows"]}
     for path in cfgs:  # exactly what bsp-train --config reads
         cfg = C.validate(C.defaults() | C.read_yaml(path))
-        assert cfg["task"] == tab["task"] and cfg["epochs"] == tab["budgets"]["quick"]["epochs"]
+        own = (rows[path.stem].get("budgets") or {}).get("quick") or {}
+        epochs = own.get("epochs", tab["budgets"]["quick"]["epochs"])
+        assert cfg["task"] == tab["task"] and cfg["epochs"] == epochs
         assert cfg["out"].endswith(f"{table}-quick/{path.stem}")
+
+
+def test_row_budget_options_override_the_table_budget_only_for_that_budget(tmp_path):
+    tab = R.load_table("lifting")
+    row = dict(tab["rows"][1], budgets={"quick": {"epochs": 3, "batch_size": 7}})
+    quick = R.row_options(tab, row, "quick", tmp_path, tmp_path / "r")
+    assert (quick["epochs"], quick["batch_size"]) == (3, 7)
+    full = R.row_options(tab, row, "full", tmp_path, tmp_path / "r")
+    assert full["epochs"] == tab["budgets"]["full"]["epochs"]
+    assert R.row_options(tab, row, "quick", tmp_path, tmp_path / "r",
+                         {"epochs": 1})["epochs"] == 1   # --set still wins
+    bad = tmp_path / "bad.yaml"
+    import yaml
+    doc = yaml.safe_load(open(tab["path"]))
+    doc["rows"][0]["budgets"] = {"fast": {"epochs": 1}}
+    bad.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ValueError, match="budgets must be a mapping with keys"):
+        R.load_table(bad)
 
 
 def test_table_contents_match_the_report_setup():

@@ -58,6 +58,11 @@ def load_table(table) -> dict:
         if not isinstance(doc, dict) or key not in doc:
             raise ValueError(f"{path}: missing key {key!r}")
     names = [r["name"] for r in doc["rows"]]
+    for r in doc["rows"]:
+        extra = r.get("budgets") or {}
+        if not isinstance(extra, dict) or set(extra) - set(doc["budgets"]):
+            raise ValueError(f"{path}: row {r['name']!r}: budgets must be a mapping with keys "
+                             f"from {list(doc['budgets'])}, got {extra!r}")
     if len(set(names)) != len(names):
         raise ValueError(f"{path}: duplicate row names in {names}")
     for f in doc["findings"]:
@@ -84,13 +89,16 @@ def _rows_of(f: dict) -> list:
 
 
 def row_options(table: dict, row: dict, budget: str, data, run_dir, overrides=None) -> dict:
-    """bsp-train options of one row: common < budget < row < ``overrides``."""
+    """bsp-train options of one row: common < budget < row < the row's own options for this
+    budget (``budgets: {quick: {...}}`` in the row, e.g. fewer epochs for a model that is
+    100x slower than the others) < ``overrides``."""
     if budget not in table["budgets"]:
         raise ValueError(f"budget {budget!r} not in {table['path']}; allowed: "
                          + ", ".join(table["budgets"]))
     opts = dict(table["common"])
     opts.update(table["budgets"][budget] or {})
     opts.update(row.get("options") or {})
+    opts.update((row.get("budgets") or {}).get(budget) or {})
     opts.update(overrides or {})
     opts.update(data=str(data), out=str(run_dir))
     return C.normalise(opts, f"{table['table']} row {row['name']!r}")

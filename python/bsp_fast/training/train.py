@@ -142,24 +142,24 @@ def resolve_precision(precision: str, accelerator: str) -> str:
 
 
 def check_precision(module, precision: str, accelerator: str) -> None:
-    """bf16 on a CPU: oneDNN has no bf16 LSTM kernel without AVX512-BF16/AMX (measured:
-    "could not create a primitive descriptor for the LSTM forward propagation primitive"),
-    so an LSTM model is probed once and refused with a clear message instead."""
+    """bf16 on a CPU without bf16 instructions (AVX512-BF16/AMX): allowed, with a warning.
+    oneDNN then converts to and from bf16 around float32 arithmetic (measured 5-17x
+    slower than 32 on an AVX2 CPU) and has no bf16 LSTM kernel, so the models' LSTM
+    layers run in float32 inside autocast (``models.lstm``)."""
+    import warnings
+
     import torch
 
     on_cpu = accelerator == "cpu" or not torch.cuda.is_available()
     if not (precision.startswith("bf16") and on_cpu):
         return
-    if not any(isinstance(m, torch.nn.LSTM) for m in module.modules()):
-        return
-    probe = torch.nn.LSTM(4, 4, batch_first=True)
-    try:
-        with torch.autocast("cpu", dtype=torch.bfloat16):
-            probe(torch.zeros(1, 2, 4))
-    except RuntimeError:
-        raise C.ConfigError(f"--precision {precision}: this CPU has no bf16 LSTM kernel "
-                            f"(oneDNN) and model {module.hparams['model']!r} uses an LSTM; "
-                            "use --precision 32") from None
+    from ..models.lstm import _cpu_bf16
+
+    if not _cpu_bf16():
+        warnings.warn(f"--precision {precision} on a CPU without bf16 instructions "
+                      "(AVX512-BF16/AMX): expect it to be several times slower than "
+                      "--precision 32 (docs/training.md, Precision); LSTM layers run in "
+                      "float32", UserWarning, stacklevel=2)
 
 
 def _extra_logger(kind: str, tmp: Path, name: str):
@@ -219,6 +219,7 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
             callbacks.append(EarlyStopping(monitor="val/loss", mode="min",
                                            patience=cfg["early_stop"]))
         return pl.Trainer(devices=cfg["devices"], strategy=cfg["strategy"],
+                          num_nodes=cfg.get("num_nodes") or 1,
                           max_epochs=cfg["epochs"], logger=loggers, callbacks=callbacks,
                           default_root_dir=str(tmp), log_every_n_steps=50, **common)
     except C.ConfigError:
@@ -228,6 +229,14 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
 
 
 # ---------------------------------------------------------------------- the run
+def _shared_tmp(cfg: dict) -> str | None:
+    """Processes the user started (torchrun, or one bsp-train per machine with NODE_RANK
+    and --num-nodes): the run directory's temporary name, the same on every rank."""
+    if "TORCHELASTIC_RUN_ID" not in os.environ and (cfg.get("num_nodes") or 1) == 1:
+        return None
+    return f".{Path(cfg['out']).name}.tmp-ddp-{os.environ.get('MASTER_PORT', '0')}"
+
+
 def _train(cli: dict, config_path=None) -> TrainResult | None:
     cfg, resume = resolve_config(cli, config_path)
     import lightning.pytorch as pl
@@ -235,7 +244,13 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
 
     from .tasks import TASK_MODULES
 
-    child = bool(os.environ.get(ENV_TMP)) and _rank() > 0  # a DDP process Lightning started
+    shared = _shared_tmp(cfg)
+    started = max(int(os.environ.get(k, "0")) if os.environ.get(k, "").isdigit() else 0
+                  for k in ("RANK", "NODE_RANK"))  # > 0: not the first process/machine
+    if shared and started > 0 and not os.environ.get(ENV_TMP):
+        os.environ[ENV_TMP] = str(Path(cfg["out"]).absolute().with_name(shared))
+    # a DDP process Lightning started, or one the user started on another machine
+    child = bool(os.environ.get(ENV_TMP)) and max(_rank(), started) > 0
     if cfg["threads"]:
         torch.set_num_threads(cfg["threads"])
     precision = resolve_precision(cfg["precision"], cfg["accelerator"])
@@ -261,7 +276,7 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
         return None
     final = Path(cfg["out"])
     copy_from = resume["run_dir"] if resume is not None else None
-    with RunDirectory(final, force=cfg["force"], copy_from=copy_from) as tmp:
+    with RunDirectory(final, force=cfg["force"], copy_from=copy_from, tmp_name=shared) as tmp:
         if copy_from is not None:
             ckpt_path = tmp / "checkpoints" / "last.ckpt"
         trainer = make_trainer(cfg, tmp, precision)
