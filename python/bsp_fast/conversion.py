@@ -185,6 +185,8 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
         skip_bad_media=skip_bad_media)
     _positive("threads", threads)
     _positive("shards", shards)
+    if shards is not None and client is None:
+        raise ValueError("shards needs a client (a Dask cluster to run them on)")
     if progress is None:
         progress = _is_terminal(sys.stderr)
     st = settings

@@ -41,17 +41,19 @@ def _convert_shard(csv: str, folder: str, k: int, count: int, options: dict,
                    exclude: list) -> dict:
     """One Dask task: shard ``k`` of ``count`` into ``folder/part-k.h5`` (temporary name,
     renamed when complete; discarded when a media file failed)."""
-    from ._dask import test_hook, worker_threads
+    from ._dask import heap_for_media, test_hook, worker_threads
 
     test_hook("shard", k)
+    t0 = time.perf_counter()
     opts = dict(options)
     if not opts.get("threads"):
         opts["threads"] = worker_threads()
     final = os.path.join(folder, _part_name(k))
     tmp = os.path.join(folder, f".{_part_name(k)}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
     try:
-        report = _core.convert_csv(csv, tmp, None, shard_count=count, shard_index=k,
-                                   exclude=[tuple(e) for e in exclude], **opts)
+        with heap_for_media():
+            report = _core.convert_csv(csv, tmp, None, shard_count=count, shard_index=k,
+                                       exclude=[tuple(e) for e in exclude], **opts)
         if report["shard_failures"]:
             Path(tmp).unlink(missing_ok=True)
         else:
@@ -60,6 +62,7 @@ def _convert_shard(csv: str, folder: str, k: int, count: int, options: dict,
         Path(tmp).unlink(missing_ok=True)
         raise
     report["shard"] = k
+    report["seconds"]["task"] = time.perf_counter() - t0
     return report
 
 
@@ -116,6 +119,9 @@ def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
         if strict and report["warnings"]:
             raise UnusableConversion(f"{root}: unusable conversion (strict): "
                                      + "; ".join(report["warnings"]) + "; nothing written")
+        for p in tmp_dir.iterdir():  # left by attempts whose worker died mid-write
+            if p.name.startswith("."):
+                p.unlink()
         _write_virtual(tmp_file, tmp_dir, final_dir.name, shards)
         _publish(tmp_file, tmp_dir, out, final_dir)
     except BaseException:
@@ -144,6 +150,7 @@ def _merge(reports: list, passes: int, shards: int, seconds: float) -> dict:
     report["seconds"] = {k: max(r["seconds"].get(k, 0.0) for r in reports)
                          for k in reports[0]["seconds"]}
     report["seconds"]["total"] = seconds
+    report["seconds"]["tasks_sum"] = sum(r["seconds"]["task"] for r in reports)
     report["shards"] = shards
     report["scheduler"] = "dask"
     return report
