@@ -107,6 +107,9 @@ OPTIONS: tuple = (
        "comma-separated list of GPU indices", "training"),
     _o("strategy", "str", "auto", "Lightning strategy (ddp: one process per device; on CPU "
        "through gloo)", "training", choices=STRATEGIES),
+    _o("num_nodes", "int", 1, "machines of a multi-machine DDP run: start bsp-train on each "
+       "with MASTER_ADDR, MASTER_PORT and NODE_RANK set, or under torchrun "
+       "(docs/distributed.md)", "training", minimum=1, metavar="N"),
     _o("precision", "str", "auto", "arithmetic precision; auto = bf16-mixed on GPUs that "
        "support it, 32 on CPU (see docs/training.md for the measurements)", "training",
        choices=PRECISIONS),

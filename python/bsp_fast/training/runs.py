@@ -43,10 +43,12 @@ class RunDirectory:
     is in place); on an exception ``tmp`` is deleted and ``final`` is untouched.
 
     ``copy_from`` (a resumed run) seeds ``tmp`` with that directory's files. Replacing an
-    existing ``final`` needs ``force`` or ``final == copy_from``.
+    existing ``final`` needs ``force`` or ``final == copy_from``. ``tmp_name``: the
+    temporary directory's name (default ``.NAME.tmp-PID``; multi-machine DDP runs use one
+    every rank can compute).
     """
 
-    def __init__(self, final, *, force: bool = False, copy_from=None):
+    def __init__(self, final, *, force: bool = False, copy_from=None, tmp_name=None):
         self.final = Path(final).absolute()
         self.copy_from = None if copy_from is None else Path(copy_from).absolute()
         in_place = self.copy_from is not None and self.copy_from == self.final
@@ -55,7 +57,7 @@ class RunDirectory:
                            code=3)
         if self.final.exists() and not self.final.is_dir():
             raise RunError(f"{self.final} exists and is not a directory")
-        self.tmp = self.final.with_name(f".{self.final.name}.tmp-{os.getpid()}")
+        self.tmp = self.final.with_name(tmp_name or f".{self.final.name}.tmp-{os.getpid()}")
         self.committed = False
 
     def __enter__(self) -> Path:
