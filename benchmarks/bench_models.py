@@ -45,6 +45,11 @@ def cpu_info() -> dict:
             "threads": torch.get_num_threads(), "cores": os.cpu_count()}
 
 
+def _rate(v: float) -> str:
+    """Clips/s: thousands separators, two significant digits below 10 (PoseFormer: ~1)."""
+    return f"{v:,.0f}" if v >= 10 else f"{v:.2g}"
+
+
 def load() -> str:
     return "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg())
 
@@ -128,12 +133,12 @@ def speed_section(args, work: str) -> None:
                 bl = ds.loader(args.bf16_batch, num_workers=args.workers, drop_last=True,
                                sampler_seed=0)
                 r = time_training(model, bl, args.steps, args.warmup, True)
-                cells.append(f"{r['clips_s']:,.0f} (B={args.bf16_batch}) | "
+                cells.append(f"{_rate(r['clips_s'])} (B={args.bf16_batch}) | "
                              f"{100 * r['wait_share']:.1f}")
                 del bl
             else:
                 r = time_training(model, loader, args.steps, args.warmup, bf16)
-                cells.append(f"{r['clips_s']:,.0f} | {100 * r['wait_share']:.1f}")
+                cells.append(f"{_rate(r['clips_s'])} | {100 * r['wait_share']:.1f}")
         print(f"| {task}/{name} | {B} | " + " | ".join(cells) + " |", flush=True)
         del loader
     print(load())
