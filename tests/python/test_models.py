@@ -331,6 +331,25 @@ def test_trivial_baselines():
     assert pred.shape == (3, 4, 26, 2) and (pred[..., 0, :] == 10.0).all()
 
 
+def test_pose_cnn_regression_starts_at_the_mean_training_skeleton():
+    crops = torch.zeros(2, 3, 3, 32, 32, dtype=torch.uint8)
+    t = torch.rand(2, 3, 26, 2) * 32
+    base = models.trivial_baseline("pose_estimation").fit(
+        [{"inputs": crops, "targets": t, "visible": torch.ones(2, 3, 26, dtype=torch.bool)}])
+    assert base.crop_size == 32
+    torch.manual_seed(0)
+    m = models.create("pose_estimation", "pose_cnn", width=4, hidden=8).eval()
+    torch.nn.init.zeros_(m.out.weight)  # the head's output is then exactly its anchor
+    with torch.no_grad():
+        assert torch.allclose(m(crops), torch.full((2, 3, 26, 2), 16.0))  # the centre
+        m.init_from_baseline(base)
+        torch.testing.assert_close(m(crops), t.mean(dim=(0, 1)).expand(2, 3, 26, 2))
+    assert "anchor" in m.state_dict()  # travels with checkpoints
+    heat = models.create("pose_estimation", "pose_cnn", width=4, hidden=8, head="heatmap")
+    heat.init_from_baseline(base)  # soft-argmax head: nothing to anchor
+    assert (heat.anchor == 0.5).all()
+
+
 @pytest.mark.parametrize("task,name", ALL)
 def test_bf16_autocast_training_step(task, name):
     """Every model runs under torch.autocast("cpu", bfloat16), also on CPUs without a bf16

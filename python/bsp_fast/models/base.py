@@ -136,6 +136,10 @@ class BaseModel(nn.Module):
         sched, interval = self.scheduler(opt)
         return opt, sched, interval
 
+    def init_from_baseline(self, baseline) -> None:
+        """Starts the model from its task's fitted trivial baseline where that helps (called
+        by ``bsp-train`` after the "initial metrics"); most models ignore it."""
+
     def extra_repr(self) -> str:
         return f"task={self.task!r}, name={self.name!r}, hparams={self.hparams}"
 

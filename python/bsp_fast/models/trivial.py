@@ -108,8 +108,11 @@ class MeanCropSkeleton(_Trivial, PoseEstimationModel):
         self.register_buffer("total", torch.zeros(J, 2, dtype=torch.float64))
         self.register_buffer("count", torch.zeros(J, dtype=torch.float64))
         self.register_buffer("pose", torch.zeros(J, 2))
+        self.crop_size = 0
 
     def _update(self, batch):
+        if "inputs" in batch:
+            self.crop_size = int(batch["inputs"].shape[-1])
         t = batch["targets"].double()
         vis = batch.get("visible")
         m = torch.ones(t.shape[:-1], dtype=torch.float64) if vis is None else vis.double()

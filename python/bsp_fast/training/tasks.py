@@ -167,10 +167,12 @@ def load_module(ckpt_path, task: str | None = None, map_location="cpu") -> TaskM
 
 
 @torch.no_grad()
-def initial_metrics(task: str, train_loader, eval_loaders: dict, limit: int = 0) -> dict:
+def initial_metrics(task: str, train_loader, eval_loaders: dict, limit: int = 0,
+                    model=None) -> dict:
     """Fits ``bsp_fast.models.trivial_baseline(task)`` on the train batches and scores it
     like a trained model on each of ``eval_loaders`` (``{split: loader}``):
-    ``{"baseline": name, split: {metric: value}}``. ``limit`` > 0 caps the batches read."""
+    ``{"baseline": name, split: {metric: value}}``. ``limit`` > 0 caps the batches read.
+    ``model`` (the model about to be trained) gets ``init_from_baseline(baseline)``."""
     import itertools
 
     from .. import models
@@ -179,6 +181,8 @@ def initial_metrics(task: str, train_loader, eval_loaders: dict, limit: int = 0)
     base.eval()
     cap = (lambda it: itertools.islice(it, limit)) if limit else (lambda it: it)
     base.fit(cap(iter(train_loader)))
+    if model is not None:
+        model.init_from_baseline(base)
     out = {"baseline": BASELINES[task]}
     for split, loader in eval_loaders.items():
         metrics = TaskMetrics(task)

@@ -291,7 +291,7 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
         if previous and previous.get("initial"):
             initial = previous["initial"]
         else:
-            initial = _initial(cfg, dm)
+            initial = _initial(cfg, dm, module.net)
         seconds["initial"] = time.perf_counter() - t0
         _log_initial(trainer, initial, cfg["quiet"])
         pl.seed_everything(cfg["seed"], workers=True, verbose=False)
@@ -309,12 +309,12 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
     return result
 
 
-def _initial(cfg: dict, dm) -> dict:
+def _initial(cfg: dict, dm, model=None) -> dict:
     from .tasks import initial_metrics
 
     loaders = {"val": dm.val_dataloader(), "test": dm.test_dataloader()}
     return initial_metrics(cfg["task"], dm.train_dataloader(), loaders,
-                           limit=cfg["limit_batches"])
+                           limit=cfg["limit_batches"], model=model)
 
 
 def _log_initial(trainer, initial: dict, quiet: bool) -> None:
