@@ -9,7 +9,7 @@
    Each runs --repeats times, interleaved, the fastest counts; the clusters are started
    before timing (their start-up time is reported apart). The Dask outputs are checked equal to the
    threaded one.
-3. Prints a table: wall seconds, crops/s, speed-up over 1 thread, Dask time / threads time
+3. Prints a table: wall seconds (best and median), median CPU seconds, crops/s (best), speed-up over 1 thread, Dask time / threads time
    at the same core count (the overhead of the Dask path), and the 1-minute load average
    before and after each configuration (the machine is shared).
 
@@ -114,22 +114,25 @@ def main(argv=None) -> int:
     for name in order:
         best = min(runs[name], key=lambda r: r["wall"])
         best["load"] = (min(r["load"] for r in runs[name]), max(r["load"] for r in runs[name]))
+        best["median"] = float(np.median([r["wall"] for r in runs[name]]))
+        best["cpu"] = float(np.median([r["cpu"] for r in runs[name]]))
         rows[name] = best
     for w in (1, 2):
         assert same(out / "t2.h5", out / f"d{w}.h5"), f"dask {w} output differs"
     base = rows["threads, 1"]["wall"]
     print(f"{args.clips} recordings x {args.frames} frames, 1600x600, "
-          f"{rows['threads, 1']['frames']} crops, best of {args.repeats}; "
+          f"{rows['threads, 1']['frames']} crops, {args.repeats} interleaved runs each; "
           f"{os.cpu_count()} cores")
-    print("| converter | cores | wall s | CPU s | crops/s | speed-up vs 1 thread | "
+    print("| converter | cores | wall s (best) | wall s (median) | CPU s (median) | crops/s | "
+          "speed-up vs 1 thread | "
           "wall vs threads, same cores | Dask: s outside the slowest task | "
           "load (1 min) at the starts |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---|")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     for name, r in rows.items():
         cores = 1 if name.endswith(" 1") or "1 worker" in name else 2
         ref = rows[f"threads, {cores}"]["wall"]
         outside = f"{r['outside']:.2f}" if name.startswith("dask") else ""
-        print(f"| {name} | {cores} | {r['wall']:.2f} | {r['cpu']:.2f} | "
+        print(f"| {name} | {cores} | {r['wall']:.2f} | {r['median']:.2f} | {r['cpu']:.2f} | "
               f"{r['frames'] / r['wall']:.0f} | {base / r['wall']:.2f} | "
               f"{r['wall'] / ref:.3f} | {outside} | {r['load'][0]:.1f}-{r['load'][1]:.1f} |")
     print("cluster start-up (not in the times above): "

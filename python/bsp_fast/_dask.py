@@ -104,9 +104,17 @@ def test_hook(task: str, index: int) -> None:
     * ``kill:TASK:INDEX:MARKER``: the first attempt of task ``TASK`` (``shard`` or ``clip``)
       number ``INDEX`` creates the file ``MARKER`` and ends its worker process with
       ``os._exit`` (the next attempt finds the marker and runs normally);
-    * ``sleep:TASK:SECONDS``: every such task sleeps first (to interrupt a run).
+    * ``sleep:TASK:SECONDS``: every such task sleeps first (to interrupt a run);
+    * ``@PATH``: the spec is read from the file PATH when it exists (so that worker
+      processes restarted after a kill see what the test sets).
     """
     spec = os.environ.get("BSP_FAST_TEST_DASK_HOOK", "")
+    if spec.startswith("@"):
+        try:
+            with open(spec[1:], encoding="utf-8") as fh:
+                spec = fh.read().strip()
+        except FileNotFoundError:
+            return
     if not spec:
         return
     parts = spec.split(":", 3)

@@ -99,9 +99,8 @@ def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
     try:
         tmp_dir.mkdir(parents=True)
         exclude: list = []
-        passes = 0
+        passes = 1  # writes, as the one-process converter counts them
         while True:
-            passes += 1
             reports = _run_shards(client, csv, tmp_dir, shards, options, exclude)
             failures = sorted((f for r in reports for f in r["shard_failures"]),
                               key=lambda f: (f["phase"], f["order"]))
@@ -111,6 +110,7 @@ def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
                 _raise_failure(failures[0])
             for f in failures:  # plan again without them, as the one-process converter does
                 exclude.append((*f["recording"], f["path"], f["reason"]))
+            passes += any(f["phase"] == 1 for f in failures)  # found only while decoding
             for p in tmp_dir.iterdir():
                 p.unlink()
         report = _merge(reports, passes, shards, time.perf_counter() - t0)

@@ -29,11 +29,23 @@ pytestmark = pytest.mark.filterwarnings("ignore:bsp_fast.convert:UserWarning")
 
 
 @pytest.fixture(scope="module")
-def client():
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, \
-            distributed.Client(cluster) as c:
-        yield c
+def client(tmp_path_factory):
+    # the fault-injection spec lives in a file every worker reads, also one restarted
+    # after a test killed its predecessor
+    hook = tmp_path_factory.mktemp("hook") / "spec"
+    old = os.environ.get("BSP_FAST_TEST_DASK_HOOK")
+    os.environ["BSP_FAST_TEST_DASK_HOOK"] = f"@{hook}"
+    try:
+        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                      dashboard_address=None) as cluster, \
+                distributed.Client(cluster) as c:
+            c.hook_file = hook
+            yield c
+    finally:
+        if old is None:
+            os.environ.pop("BSP_FAST_TEST_DASK_HOOK", None)
+        else:
+            os.environ["BSP_FAST_TEST_DASK_HOOK"] = old
 
 
 @pytest.fixture(scope="module")
@@ -141,6 +153,7 @@ def test_bad_media_same_error_or_left_out_the_same(ds, single, client, tmp_path)
     a = cv.convert(copy, tmp_path / "a.h5", skip_bad_media=True, **OPTS)
     b = cv.convert(copy, out, client=client, shards=2, skip_bad_media=True, **OPTS)
     assert a["media"]["bad"] == [tuple(x) for x in b["media"]["bad"]] and len(a["media"]["bad"]) == 1
+    assert a["media"]["passes"] == b["media"]["passes"] == 1
     assert_same(tmp_path / "a.h5", out)
 
 
@@ -175,12 +188,10 @@ def test_file_damaged_mid_decode_same_error_or_second_pass(ds, single, client, t
 
 
 def _set_hook(client, value):
-    def setter(v=value):
-        if v is None:
-            os.environ.pop("BSP_FAST_TEST_DASK_HOOK", None)
-        else:
-            os.environ["BSP_FAST_TEST_DASK_HOOK"] = v
-    client.run(setter)
+    if value is None:
+        client.hook_file.unlink(missing_ok=True)
+    else:
+        client.hook_file.write_text(value)
 
 
 def test_worker_killed_mid_task_is_retried(ds, single, client, tmp_path):
@@ -244,3 +255,17 @@ def test_synth_on_dask_is_byte_identical(client, tmp_path):
     match, mismatch, errors = filecmp.cmpfiles(tmp_path / "a", tmp_path / "b", files, shallow=False)
     assert mismatch == [] and errors == []
     client.wait_for_workers(2, timeout=60)
+
+
+def test_refused_csv_is_the_same_error(client, tmp_path):
+    sys.path.insert(0, str(Path(__file__).parent))
+    from bsp_testdata import recording, write_dataset
+
+    rows = recording("094b9fe1-babe-48d5-bd17-3ba3185690c5-0", range(20))
+    for r in rows:
+        r["camera.recording"] = "/etc/passwd"
+    root = write_dataset(tmp_path / "ds", rows)
+    one = _error(lambda: cv.convert(root, tmp_path / "a.h5"))
+    assert "is absolute" in one[1]
+    assert _error(lambda: cv.convert(root, tmp_path / "b.h5", client=client)) == one
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
