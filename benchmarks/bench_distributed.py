@@ -13,7 +13,11 @@
    at the same core count (the overhead of the Dask path), and the 1-minute load average
    before and after each configuration (the machine is shared).
 
+4. With --synth-clips N: bsp-synth of N clips (--frames frames at 1600x600) with
+   --workers 2 against --scheduler dask (2 workers), interleaved, byte-identical checked.
+
     python benchmarks/bench_distributed.py [--clips 8] [--frames 300] [--repeats 2]
+                                           [--synth-clips 0]
 """
 from __future__ import annotations
 
@@ -73,6 +77,39 @@ def same(a: Path, b: Path) -> bool:
     return True
 
 
+def bench_synth(args) -> int:
+    import filecmp
+
+    from bsp_fast._dask import open_client
+    from bsp_fast.synth import generate
+
+    out = Path(args.dir) / "synth-dist"
+    kw = dict(clips=args.synth_clips, frames=args.frames, size="1600x600", seed=args.seed,
+              progress=False, force=True)
+    times: dict = {"--workers 2": [], "--scheduler dask (2 workers)": []}
+    with open_client("", n_workers=2) as client:
+        for _ in range(args.repeats):
+            for name, extra in (("--workers 2", dict(workers=2)),
+                                ("--scheduler dask (2 workers)", dict(client=client))):
+                load = os.getloadavg()[0]
+                t0 = time.perf_counter()
+                generate(out / name.split()[0].strip("-"), "sample", **kw, **extra)
+                times[name].append((time.perf_counter() - t0, load))
+    a, b = out / "workers", out / "scheduler"
+    files = [str(p.relative_to(a)) for p in a.rglob("*") if p.is_file()]
+    _, bad, err = filecmp.cmpfiles(a, b, files, shallow=False)
+    print(f"bsp-synth {args.synth_clips} clips x {args.frames} frames at 1600x600, "
+          f"{args.repeats} interleaved runs; byte-identical: {not bad and not err}")
+    print("| mode | wall s (best) | wall s (median) | load (1 min) at the starts |")
+    print("|---|---:|---:|---|")
+    for name, runs in times.items():
+        walls = [w for w, _ in runs]
+        loads = [x for _, x in runs]
+        print(f"| {name} | {min(walls):.1f} | {np.median(walls):.1f} | "
+              f"{min(loads):.1f}-{max(loads):.1f} |")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -81,7 +118,10 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=11)
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--dir", default=os.path.join(tempfile.gettempdir(), "bsp_bench_media"))
+    ap.add_argument("--synth-clips", type=int, default=0)
     args = ap.parse_args(argv)
+    if args.synth_clips:
+        return bench_synth(args)
     import warnings
 
     import bsp_fast as bf
