@@ -4,10 +4,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <vector>
 
 #include "bsp/common/errors.hpp"
 #include "bsp/conversion/convert.hpp"
+#include "conversion/convert_internal.hpp"
 
 using namespace bsp;
 
@@ -95,4 +97,67 @@ TEST_CASE("crop_resize: zero padding outside the image, nearest and area resizin
   CHECK(half[2] == 0);
   CHECK(half[3] == 8);  // 7.5 rounds to 8
   CHECK_THROWS_AS(crop_resize(img.data(), 0, 0, 4, 4, 1, {0, 0, 4, 3}, 2, false, half.data()), Error);
+}
+
+// ---- Shards of a distributed conversion (shard.cpp) ----------------------------------
+
+namespace {
+
+// A frame table of blocks of the given frame counts (recordings numbered from `rec0`),
+// with `clips` clips of L = 2 frames pointing at rows 0, 1, 2, ...
+detail::FrameTable table(std::vector<std::size_t> frames, std::uint32_t rec0, std::size_t clips) {
+  detail::FrameTable t;
+  t.begin.push_back(0);
+  for (std::size_t b = 0; b < frames.size(); ++b) {
+    t.recordings.push_back(rec0 + static_cast<std::uint32_t>(b));
+    for (std::size_t f = 0; f < frames[b]; ++f) t.rows.push_back(100 * b + f);
+    t.begin.push_back(t.rows.size());
+  }
+  for (std::size_t i = 0; i < clips * 2; ++i) t.clip_frames.push_back(static_cast<std::int64_t>(i));
+  return t;
+}
+
+}  // namespace
+
+TEST_CASE("shard_parts: clips and whole recordings cut into K runs that cover everything") {
+  Plan plan;
+  plan.splits[0].resize(7), plan.splits[1].resize(2), plan.splits[2].resize(3);
+  // 70 frames: split 0 blocks of 10, 10, 10, 10; split 1 one of 5; split 2 of 20 and 5.
+  const std::array<detail::FrameTable, 3> t = {table({10, 10, 10, 10}, 0, 7), table({5}, 4, 2),
+                                               table({20, 5}, 5, 3)};
+  const auto two0 = detail::shard_parts(plan, t, 2, 0, 2), two1 = detail::shard_parts(plan, t, 2, 1, 2);
+  // blocks by frames: shard 0 starts before frame 35 (blocks starting at 0, 10, 20, 30)
+  CHECK(two0.blocks[0] == std::make_pair<std::size_t, std::size_t>(0, 4));
+  CHECK(two0.blocks[1] == std::make_pair<std::size_t, std::size_t>(0, 0));
+  CHECK(two1.blocks[1] == std::make_pair<std::size_t, std::size_t>(0, 1));
+  CHECK(two1.blocks[2] == std::make_pair<std::size_t, std::size_t>(0, 2));
+  // clips: floor(N k / K)
+  CHECK(two0.clips[0] == std::make_pair<std::size_t, std::size_t>(0, 3));
+  CHECK(two1.clips[0] == std::make_pair<std::size_t, std::size_t>(3, 7));
+  for (int K : {1, 3, 5, 9}) {
+    for (int s = 0; s < 3; ++s) {
+      std::size_t next_block = 0, next_clip = 0;
+      for (int k = 0; k < K; ++k) {
+        const auto p = detail::shard_parts(plan, t, 2, k, K);
+        CHECK(p.blocks[s].first == next_block);  // contiguous, in order, no gap or overlap
+        CHECK(p.clips[s].first == next_clip);
+        next_block = p.blocks[s].second, next_clip = p.clips[s].second;
+      }
+      CHECK(next_block == t[s].recordings.size());
+      CHECK(next_clip == plan.splits[s].size());
+    }
+  }
+  CHECK_THROWS_AS(detail::shard_parts(plan, t, 2, 2, 2), std::invalid_argument);
+}
+
+TEST_CASE("slice_table: rows rebased per shard, clip_frames keep whole-table numbers") {
+  const detail::FrameTable full = table({3, 4, 2}, 7, 4);
+  const detail::FrameTable s = detail::slice_table(full, {1, 3}, {1, 3}, 2);
+  CHECK(s.recordings == std::vector<std::uint32_t>{8, 9});
+  CHECK(s.begin == std::vector<std::size_t>{0, 4, 6});
+  CHECK(s.rows == std::vector<std::size_t>{100, 101, 102, 103, 200, 201});
+  CHECK(s.clip_frames == std::vector<std::int64_t>{2, 3, 4, 5});
+  const detail::FrameTable none = detail::slice_table(full, {2, 2}, {0, 0}, 2);
+  CHECK(none.frames() == 0);
+  CHECK(none.begin == std::vector<std::size_t>{0});
 }
