@@ -57,15 +57,18 @@ def open_client(address: str, n_workers: int | None = None, needed_by: str = "bs
 
 
 def worker_threads(default: int = 1) -> int:
-    """Threads of the Dask worker running the calling task (``default`` outside one)."""
+    """The calling task's share of its Dask worker's threads: ``nthreads`` divided by the
+    tasks the worker is executing now (``default`` outside a worker)."""
     try:
         from distributed import get_worker
 
         w = get_worker()
     except (ImportError, ValueError):
         return default
-    n = getattr(w, "nthreads", None) or getattr(getattr(w, "state", None), "nthreads", None)
-    return int(n or default)
+    state = getattr(w, "state", None)
+    n = getattr(w, "nthreads", None) or getattr(state, "nthreads", None) or default
+    running = len(getattr(state, "executing", ()) or ()) or 1
+    return max(1, int(n) // running)
 
 
 @contextlib.contextmanager

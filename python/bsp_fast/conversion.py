@@ -168,7 +168,7 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
     table.
 
     ``client`` (a ``distributed.Client``) converts on a Dask cluster instead: ``shards``
-    tasks (default: one per worker thread), each writing part of the output into the folder
+    tasks (default: one per worker), each writing part of the output into the folder
     ``<out_path>.shards``, and ``out_path`` made of HDF5 virtual datasets over them, equal
     value for value to the one-process output (docs/distributed.md).
     """
@@ -331,7 +331,7 @@ def _parser() -> argparse.ArgumentParser:
                         "virtual datasets over the folder OUT.shards, which must stay next to "
                         "it (docs/distributed.md)")
     p.add_argument("--shards", type=int, default=None, metavar="N",
-                   help="with --scheduler dask: tasks (default: one per worker thread); the "
+                   help="with --scheduler dask: tasks (default: one per Dask worker); the "
                         "output does not depend on it")
     p.add_argument("--compress", action="store_true",
                    help="shuffle+deflate the large target arrays and the RGB crops (smaller, "

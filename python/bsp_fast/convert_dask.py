@@ -90,7 +90,7 @@ def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
     from .conversion import UnusableConversion
 
     if shards is None:
-        shards = max(1, sum(client.nthreads().values()))
+        shards = max(1, len(client.nthreads()))  # one per worker, with its threads
     t0 = time.perf_counter()
     token = f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
     tmp_dir = out.with_name(f".{out.name}.tmp-{token}.shards")
