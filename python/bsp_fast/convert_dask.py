@@ -91,6 +91,15 @@ def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
 
     if shards is None:
         shards = max(1, len(client.nthreads()))  # one per worker, with its threads
+    # Workers get absolute paths (their working directory is not ours); media failures
+    # name files the way the one-process converter does, relative to the path given.
+    given = os.path.dirname(csv) or "."
+    csv = os.path.abspath(csv)
+    here = os.path.dirname(csv)
+
+    def relabel(text: str) -> str:
+        return text.replace(here + os.sep, given + os.sep) if here != given else text
+
     t0 = time.perf_counter()
     token = f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
     tmp_dir = out.with_name(f".{out.name}.tmp-{token}.shards")
@@ -101,9 +110,11 @@ def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
         exclude: list = []
         passes = 1  # writes, as the one-process converter counts them
         while True:
-            reports = _run_shards(client, csv, tmp_dir, shards, options, exclude)
+            reports = _run_shards(client, csv, tmp_dir.absolute(), shards, options, exclude)
             failures = sorted((f for r in reports for f in r["shard_failures"]),
                               key=lambda f: (f["phase"], f["order"]))
+            for f in failures:
+                f["path"], f["reason"] = relabel(f["path"]), relabel(f["reason"])
             if not failures:
                 break
             if not options.get("skip_bad_media"):

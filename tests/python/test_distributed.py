@@ -269,3 +269,18 @@ def test_refused_csv_is_the_same_error(client, tmp_path):
     assert "is absolute" in one[1]
     assert _error(lambda: cv.convert(root, tmp_path / "b.h5", client=client)) == one
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+
+
+def test_relative_paths_reach_the_workers_and_errors_read_the_same(ds, single, client, tmp_path,
+                                                                    monkeypatch):
+    shutil.copytree(ds, tmp_path / "rel")
+    vid, _ = first_video(single)
+    (tmp_path / "rel" / f"{vid}.mp4").unlink()
+    monkeypatch.chdir(tmp_path)
+    one = _error(lambda: cv.convert("rel", "a.h5", **OPTS))
+    assert one[1].startswith(f"rel/{vid}.mp4: ")
+    assert _error(lambda: cv.convert("rel", "b.h5", client=client, shards=2, **OPTS)) == one
+    a = cv.convert("rel", "a.h5", skip_bad_media=True, **OPTS)
+    b = cv.convert("rel", "b.h5", client=client, shards=2, skip_bad_media=True, **OPTS)
+    assert a["media"]["bad"] == [tuple(x) for x in b["media"]["bad"]]
+    assert_same(tmp_path / "a.h5", tmp_path / "b.h5")
