@@ -113,6 +113,16 @@ def test_sharded_output_equals_one_process_for_1_2_and_5_shards(ds, single, clie
     assert_same(single, moved / "clips.h5")
 
 
+def test_no_media_and_verify_sharded(ds, client, tmp_path):
+    opts = dict(OPTS, media=False, verify=True)
+    a = cv.convert(ds, tmp_path / "a.h5", **opts)
+    b = cv.convert(ds, tmp_path / "b.h5", client=client, shards=3, **opts)
+    assert_same(tmp_path / "a.h5", tmp_path / "b.h5")
+    assert a["verify"] == b["verify"] and len(a["verify"]) == a["recordings"] > 0
+    with h5py.File(tmp_path / "b.h5") as f:
+        assert "frames" not in f["train"] and f.attrs["media"] == 0
+
+
 def test_loaders_read_the_virtual_file_unchanged(ds, single, client, tmp_path):
     pytest.importorskip("torch")
     from bsp_fast.data import ClipDataset
