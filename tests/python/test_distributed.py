@@ -121,6 +121,10 @@ def test_no_media_and_verify_sharded(ds, client, tmp_path):
     assert a["verify"] == b["verify"] and len(a["verify"]) == a["recordings"] > 0
     with h5py.File(tmp_path / "b.h5") as f:
         assert "frames" not in f["train"] and f.attrs["media"] == 0
+    # the tiny dataset has single-class splits: --strict refuses, and leaves nothing
+    with pytest.raises(cv.UnusableConversion, match="single class"):
+        cv.convert(ds, tmp_path / "c.h5", client=client, strict=True, **opts)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.h5", "b.h5", "b.h5.shards"]
 
 
 def test_loaders_read_the_virtual_file_unchanged(ds, single, client, tmp_path):
