@@ -111,10 +111,12 @@ PARAMS = {
     ("lifting", "poseformer"): (2 * 32 + 32) + 26 * 32 + 9 * 832 + 4 * block_params(32)
     + 4 * block_params(832) + 2 * 32 + 2 * 832 + (9 + 1) + 2 * 832 + 832 * 78 + 78,
     # convolutions without bias + GroupNorm affine, Linear(8w*16 -> 256), BiGRU(256, 128),
-    # Linear(256 -> 52), w = 32
+    # Linear(256 -> 52), w = 32; heatmap head (default): Conv1x1(128 -> 26), the soft-argmax
+    # temperature, Linear(256 + 52 -> 256)
     ("pose_estimation", "pose_cnn"): sum(9 * a * b + 2 * b for a, b in [
         (3, 32), (32, 64), (64, 64), (64, 128), (128, 128), (128, 256), (256, 256)])
-    + (256 * 16 * 256 + 256) + 2 * (3 * 128 * (256 + 128) + 6 * 128) + 256 * 52 + 52,
+    + (256 * 16 * 256 + 256) + 2 * (3 * 128 * (256 + 128) + 6 * 128) + 256 * 52 + 52
+    + (128 * 26 + 26) + 1 + (308 * 256 + 256),
 }
 
 
@@ -338,7 +340,8 @@ def test_pose_cnn_regression_starts_at_the_mean_training_skeleton():
         [{"inputs": crops, "targets": t, "visible": torch.ones(2, 3, 26, dtype=torch.bool)}])
     assert base.crop_size == 32
     torch.manual_seed(0)
-    m = models.create("pose_estimation", "pose_cnn", width=4, hidden=8).eval()
+    m = models.create("pose_estimation", "pose_cnn", width=4, hidden=8,
+                      head="regression").eval()
     torch.nn.init.zeros_(m.out.weight)  # the head's output is then exactly its anchor
     with torch.no_grad():
         assert torch.allclose(m(crops), torch.full((2, 3, 26, 2), 16.0))  # the centre

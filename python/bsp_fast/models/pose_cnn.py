@@ -44,18 +44,19 @@ class PoseCNN(PoseEstimationModel):
     ``[3x3 stride 2, 3x3]`` convolutions with GroupNorm (``norm="batch"``: BatchNorm) and
     ReLU (2, 4, 8 x ``width`` channels; S/16 at the end). Heads:
 
-    * ``regression`` (default): the last stage pooled to 4 x 4, flattened, ``Linear ->
+    * ``regression``: the last stage pooled to 4 x 4, flattened, ``Linear ->
       hidden``; a bidirectional GRU over the clip's frames (residual) and ``Linear(hidden ->
-      52)``, coordinates as fractions of the crop (0.5 = centre at initialisation);
-    * ``heatmap``: a 1x1 convolution of the stride-8 stage to 26 heatmaps, a soft-argmax
-      (learned temperature) per joint; the GRU adds a per-frame correction (zero at
+      52)``, coordinates as fractions of the crop added to an anchor (the crop centre, or
+      the mean training skeleton after ``init_from_baseline``);
+    * ``heatmap`` (default: it learnt faster, docs/models.md): a 1x1 convolution of the
+      stride-8 stage to 26 heatmaps, a soft-argmax (learned temperature) per joint; the GRU adds a per-frame correction (near zero at
       initialisation) from the pooled features and the soft-argmax coordinates.
 
     ``temporal="none"`` drops the GRU (frames independent). Loss: MSE in crop pixels over
     the visible joints (``batch["visible"]``).
     """
 
-    def __init__(self, *, width: int = 32, hidden: int = 256, head: str = "regression",
+    def __init__(self, *, width: int = 32, hidden: int = 256, head: str = "heatmap",
                  temporal: str = "gru", norm: str = "group", dropout: float = 0.0):
         super().__init__(locals())
         check_int("width", width)
@@ -80,12 +81,10 @@ class PoseCNN(PoseEstimationModel):
         if temporal == "gru":
             self.gru = nn.GRU(hidden, hidden // 2, batch_first=True, bidirectional=True)
         self.out = nn.Linear(hidden, 2 * J)
-        if head == "heatmap":  # the correction starts at zero
-            nn.init.zeros_(self.out.weight)
-            nn.init.zeros_(self.out.bias)
-        else:
-            nn.init.normal_(self.out.weight, std=1e-3)
-            nn.init.zeros_(self.out.bias)
+        # small, not zero: the heatmap head's correction starts near zero and gradients
+        # still reach the layers before it from the first step
+        nn.init.normal_(self.out.weight, std=1e-3)
+        nn.init.zeros_(self.out.bias)
         # where the regression head starts, as fractions of the crop: the centre, or the
         # mean training skeleton once init_from_baseline has seen it
         self.register_buffer("anchor", torch.full((J, 2), 0.5))
