@@ -45,8 +45,10 @@ ASAN_PYTESTS ?= tests/python/test_hostile.py tests/python/test_csv.py \
 	tests/python/test_media_apng.py tests/python/test_media_video.py \
 	tests/python/test_convert_media.py
 UBSAN_ENV = UBSAN_OPTIONS=print_stacktrace=1
-# (python's own allocations live until exit: no leak check there)
-PY_ASAN_ENV = $(UBSAN_ENV) ASAN_OPTIONS=detect_leaks=0 LD_PRELOAD=$$(gcc -print-file-name=libasan.so)
+# (python's own allocations live until exit: no leak check there; libstdc++ is preloaded
+# too, or ASan finds no real __cxa_throw to forward the core's first exception to)
+PY_ASAN_ENV = $(UBSAN_ENV) ASAN_OPTIONS=detect_leaks=0 \
+	LD_PRELOAD="$$(gcc -print-file-name=libasan.so) $$(gcc -print-file-name=libstdc++.so)"
 # A small dataset with media for the converter-threads driver (tests/sanitize).
 san_dataset = $(PY) -m bsp_fast synth $(1) --clips 6 --frames 40 --size 96x64 --seed 7 \
 	--workers 1 --quiet --force
