@@ -140,6 +140,16 @@ def test_loaders_read_the_virtual_file_unchanged(ds, single, client, tmp_path):
             x, y = a[i], b[i]
             for key in ("inputs", "targets"):
                 np.testing.assert_array_equal(np.asarray(x[key]), np.asarray(y[key]))
+    # OUT.h5 without its shards folder: HDF5 alone would read zeros; the loaders refuse
+    from bsp_fast.data import MissingShardError
+
+    os.replace(shard_dir(out), tmp_path / "moved")
+    with pytest.raises(MissingShardError) as info:
+        ClipDataset(out, "train", "classification")
+    assert str(out) in str(info.value)
+    assert str(shard_dir(out) / "part-00000.h5") in str(info.value)
+    os.replace(tmp_path / "moved", shard_dir(out))
+    assert len(ClipDataset(out, "train", "classification")) == len(a)
 
 
 def first_video(path):

@@ -28,6 +28,7 @@ from .transforms import (
 )
 from .functional import denormalize_hips_neck_3d
 from .camera import camera_intrinsics, carla_to_opencv, focal_length, opencv_to_carla
+from .vds import MissingShardError, check_virtual_sources, open_clip_file
 
 __all__ = [
     "ClipDataset", "FrameDataset", "BSPDataModule", "ContiguousBatchSampler", "IndexBatch",
@@ -39,6 +40,7 @@ __all__ = [
     "denormalize_hips_neck", "normalize_hips_neck_3d", "flip_horizontal", "flip_rotate", "rotate",
     "joint_bbox", "visible_joints", "denormalize_hips_neck_3d", "camera_intrinsics",
     "focal_length", "carla_to_opencv", "opencv_to_carla",
+    "MissingShardError", "open_clip_file", "check_virtual_sources",
 ]
 
 

@@ -126,9 +126,9 @@ class SplitDataset(torch.utils.data.Dataset):
     # ----------------------------------------------------------------- file handling
     def _h5(self):
         if self._file is None or self._pid != os.getpid():
-            import h5py
+            from .vds import open_clip_file
 
-            self._file, self._pid, self._ds = h5py.File(self.h5_path, "r"), os.getpid(), {}
+            self._file, self._pid, self._ds = open_clip_file(self.h5_path), os.getpid(), {}
             _open_datasets.add(self)
         return self._file
 

@@ -55,13 +55,15 @@ def crc32_file(path: Path, chunk: int = 1 << 24) -> int:
 
 def stale_reason(h5_path: Path, settings: dict, csv: Path) -> str | None:
     """Why ``h5_path`` is not the conversion of ``csv`` with ``settings`` (None: reusable)."""
-    import h5py
+    from .vds import MissingShardError, open_clip_file
 
     try:
-        with h5py.File(h5_path, "r") as f:
+        with open_clip_file(h5_path) as f:
             stored = json.loads(f.attrs.get("settings_json", "{}"))
             size = int(f.attrs.get("source_bytes", -1))
             crc = int(f.attrs.get("source_crc32", -1))
+    except MissingShardError as exc:
+        return f"its shard files are missing ({exc})"
     except (OSError, ValueError) as exc:
         return f"unreadable ({exc})"
     if stored != settings:

@@ -101,9 +101,9 @@ class ClipDataset(SplitDataset):
 
     # ----------------------------------------------------------------- header and meta
     def _read_header(self, indices, balance: bool) -> None:
-        import h5py
+        from .vds import open_clip_file
 
-        with h5py.File(self.h5_path, "r") as f:
+        with open_clip_file(self.h5_path) as f:
             version = int(f.attrs.get("schema_version", -1))
             if version != 1:
                 raise ValueError(f"{self.h5_path}: schema_version {version}, expected 1 "

@@ -46,9 +46,9 @@ class FrameDataset(SplitDataset):
         self._read_header(indices)
 
     def _read_header(self, indices) -> None:
-        import h5py
+        from .vds import open_clip_file
 
-        with h5py.File(self.h5_path, "r") as f:
+        with open_clip_file(self.h5_path) as f:
             if int(f.attrs.get("schema_version", -1)) != 1 or self.split not in f:
                 raise ValueError(f"{self.h5_path}: not a schema-1 bsp-convert file with "
                                  f"/{self.split}")

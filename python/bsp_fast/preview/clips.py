@@ -35,11 +35,11 @@ def _strings(ds, sel) -> list:
 
 def read_clips(path, split: str, sel=None, n: int = 16, seed=None) -> dict:
     """The arrays a sheet needs for clips `sel` (or the first / `seed`-random `n`)."""
-    import h5py
+    from ..data.vds import open_clip_file
 
     if split not in SPLITS:
         raise ValueError(f"split must be one of {', '.join(SPLITS)}; got {split!r}")
-    with h5py.File(path, "r") as f:
+    with open_clip_file(path) as f:
         if split not in f:
             raise ValueError(f"{path} has no split {split!r} (has {', '.join(f.keys())})")
         g = f[split]

@@ -25,13 +25,13 @@ def parse_size(size) -> tuple:
 
 
 def read_clip(path, split: str, clip: int, space: str) -> dict:
-    import h5py
+    from ..data.vds import open_clip_file
 
     if split not in SPLITS:
         raise ValueError(f"split must be one of {', '.join(SPLITS)}; got {split!r}")
     if space not in SPACES:
         raise ValueError(f"space must be one of {', '.join(SPACES)}; got {space!r}")
-    with h5py.File(path, "r") as f:
+    with open_clip_file(path) as f:
         if split not in f:
             raise ValueError(f"{path} has no split {split!r} (has {', '.join(f.keys())})")
         g = f[split]
