@@ -318,3 +318,13 @@ TEST_CASE("apng: decompression bombs are refused from the header, before any all
   fs::remove(path);
   fs::remove(anim);
 }
+
+TEST_CASE("video: a stream without a picture size is refused at open (found by fuzz_video)") {
+  // The fuzzer's input: an MP4 whose H.264 stream parameters give a 0x0 picture; it opened
+  // and reported width() == height() == 0.
+  const std::string path = BSP_FUZZ_CORPUS_DIR "/video/found_zero_picture_size.mp4";
+  REQUIRE(std::filesystem::exists(path));
+  CHECK_THROWS_WITH_AS(VideoReader(path, 1),
+                       doctest::Contains((path + ": the video stream has no valid picture size (0x0)").c_str()),
+                       VideoDecodeError);
+}

@@ -5,7 +5,8 @@ Valid seeds come from the project's own generator (bsp-synth: a 2-clip, 10-frame
 inputs of issue 15 (docs/security.md) built from them: a second IHDR, an fcTL outside the
 canvas, 30000x30000 and 100000x100000 headers, a negative frame.idx, CR-only line ends,
 non-UTF-8 bytes, a zero camera width, an HLS playlist and a concat script named .mp4, and
-more. The corpora are committed; run this again (needs bsp_fast importable) only to
+more. Files named found_* are inputs on which a harness found a bug (kept as regression
+seeds, and read by tests/cpp). The corpora are committed; run this again (needs bsp_fast importable) only to
 change them:
 
     PYTHONPATH=python python tests/fuzz/make_seeds.py
@@ -14,7 +15,6 @@ from __future__ import annotations
 
 import pathlib
 import re
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -211,8 +211,7 @@ def main() -> int:
                    "video": video_seeds(mp4, tmp)}
     for name, seeds in corpora.items():
         d = CORPUS / name
-        shutil.rmtree(d, ignore_errors=True)
-        d.mkdir(parents=True)
+        d.mkdir(parents=True, exist_ok=True)  # found_* files (fuzzer findings) are kept
         for file, data in seeds.items():
             (d / file).write_bytes(data)
         total = sum(len(v) for v in seeds.values())

@@ -88,6 +88,11 @@ void VideoReader::Impl::open(int threads) {
   dec->err_recognition |= AV_EF_EXPLODE;
   BSP_AV_CHECK(VideoDecodeError, avcodec_open2(dec.get(), codec, nullptr), path,
                "cannot open the decoder");
+  // A damaged stream header can leave the size unknown even after the probe decoded
+  // frames (found by tests/fuzz/fuzz_video): refuse it instead of reporting a 0x0 video.
+  if (dec->width <= 0 || dec->height <= 0)
+    fail("the video stream has no valid picture size (" + std::to_string(dec->width) + "x" +
+         std::to_string(dec->height) + ")");
   pkt = av::alloc_packet<VideoDecodeError>(path);
   frame = av::alloc_frame<VideoDecodeError>(path);
 }
