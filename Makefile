@@ -37,7 +37,7 @@ test-python:
 # ---------------------------------------------------------------- sanitizers and fuzzing
 # Builds in build/asan, build/tsan and build/fuzz with their own flags; build/wheel (the
 # installed module) is never touched. Configure once, then incremental like `install`.
-SAN_CMAKE = cmake -S . -DCMAKE_BUILD_TYPE=RelWithDebInfo -DBSP_WERROR=$(WERROR) \
+SAN_CMAKE = cmake -S . --no-warn-unused-cli -DCMAKE_BUILD_TYPE=RelWithDebInfo -DBSP_WERROR=$(WERROR) \
 	-DPython_EXECUTABLE=$$(command -v $(PY))
 # Python tests that drive the C++ core (readers, converter, hostile inputs), run against
 # the ASan build of _core: python itself is not instrumented, so libasan is preloaded.
@@ -102,7 +102,7 @@ fuzz: fuzz-build
 	  build/fuzz/fuzz_$$h build/fuzz/corpus/$$h tests/fuzz/corpus/$$h \
 	    -max_total_time=$(FUZZ_SECONDS) $(FUZZ_FLAGS) \
 	    -artifact_prefix=build/fuzz/crashes/$$h- > build/fuzz/$$h.log 2>&1; rc=$$?; \
-	  grep -E '^#[0-9]+ +(INITED|DONE)|^stat::(number_of_executed_units|average_exec_per_sec|peak_rss)' \
+	  grep -E '^#[0-9]+[[:space:]]+(INITED|DONE)|^stat::(number_of_executed_units|average_exec_per_sec|peak_rss)' \
 	    build/fuzz/$$h.log; \
 	  if [ $$rc -ne 0 ]; then tail -n 60 build/fuzz/$$h.log; \
 	    echo "fuzz_$$h failed (exit $$rc): input in build/fuzz/crashes/"; exit 1; fi; \
