@@ -17,8 +17,6 @@ deps:
 	@bash tools/install-deps.sh
 
 install: deps
-	@# the 'distributed' extra (bsp-convert/bsp-synth --scheduler dask), pinned exactly
-	@$(PY) -m pip install -q "dask[distributed]==2026.8.0" "distributed==2026.8.0"
 	@echo "building and installing bsp_fast (C++ core, incremental in build/wheel)"
 	@$(PY) -m pip install -q --no-build-isolation --no-deps \
 	    -Ccmake.define.BSP_WERROR=$(WERROR) -Ccmake.define.BSP_TESTS=$(TESTS) .

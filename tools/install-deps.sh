@@ -18,22 +18,11 @@ PIP_PACKAGES=(
   # Pinned exactly: this version's CPU build is on the machine; a looser pin pulls a
   # multi-GB CUDA build.
   "torch==2.13.0" "lightning>=2.2"
+  # the 'distributed' extra (bsp-convert/bsp-synth --scheduler dask; its tests), pinned
+  "dask[distributed]==2026.8.0" "distributed==2026.8.0"
 )
 
-missing=()
-for p in "${APT_PACKAGES[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-done
-if ((${#missing[@]})); then
-  if [ "$(id -u)" -ne 0 ]; then
-    echo "install-deps: need root to apt-get install: ${missing[*]}" >&2
-    exit 1
-  fi
-  echo "install-deps: apt-get install ${missing[*]}"
-  export DEBIAN_FRONTEND=noninteractive
-  apt-get update -qq
-  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
-fi
+bash tools/apt-ensure.sh install-deps "${APT_PACKAGES[@]}"
 
 # The Python to use: the first python3 with a working, writable pip; otherwise (a fresh
 # Debian whose system Python is externally managed) a virtual environment in .venv.
@@ -60,7 +49,7 @@ need = {"numpy": "1.22", "h5py": "3.8", "PyYAML": "6", "tqdm": "4.60", "pandas":
         "pytest": "7", "av": "12", "pillow": "10", "pyarrow": "14",
         "scikit-build-core": "0.10", "pybind11": "2.12", "opencv-python-headless": "4.8",
         "matplotlib": "3.5",
-        "torch": "2.13", "lightning": "2.2"}
+        "torch": "2.13", "lightning": "2.2", "dask": "2026.8", "distributed": "2026.8"}
 def v(s): return tuple(int(x) for x in s.split(".")[:2] if x.isdigit())
 for name, low in need.items():
     if v(md.version(name)) < v(low): sys.exit(1)
