@@ -11,7 +11,8 @@ import os
 
 from ._extras import require
 
-__all__ = ["parse_scheduler", "open_client", "worker_threads", "test_hook", "heap_for_media"]
+__all__ = ["parse_scheduler", "open_client", "run_on_scheduler", "worker_threads", "test_hook",
+           "heap_for_media"]
 
 SCHEDULER_HELP = ("threads (default: this process, C++ threads), dask (a local Dask cluster "
                   "with one single-threaded worker process per core) or dask:ADDRESS (an "
@@ -54,6 +55,27 @@ def open_client(address: str, n_workers: int | None = None, needed_by: str = "bs
                                      dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
         yield client
+
+
+def run_on_scheduler(spec: str, prog: str, run) -> int:
+    """A command's ``--scheduler SPEC``: ``run(None)`` for ``threads``, else ``run(client)``
+    on the Dask cluster. Exit codes: 2 for a bad SPEC, 1 when Dask is missing or the
+    cluster cannot be reached (the message printed after ``prog:``), else ``run``'s."""
+    import sys
+
+    try:
+        address = parse_scheduler(spec)
+    except ValueError as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 2
+    if address is None:
+        return run(None)
+    try:
+        with open_client(address, needed_by=f"{prog} --scheduler dask") as client:
+            return run(client)
+    except (ImportError, OSError) as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 1
 
 
 def worker_threads(default: int = 1) -> int:

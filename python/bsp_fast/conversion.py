@@ -27,7 +27,7 @@ from pathlib import Path
 
 from ._native import core as _core
 from .convert_inputs import BadDataset, _dataset_csv, _dataset_fov, _refuse_inputs_as_output
-from ._dask import SCHEDULER_HELP, open_client, parse_scheduler
+from ._dask import SCHEDULER_HELP, run_on_scheduler
 from .convert_report import ProgressBars, format_report, problems, verify_table
 
 __all__ = ["convert", "conversion_settings", "main", "format_report", "frame_media",
@@ -381,25 +381,13 @@ def main(argv=None) -> int:
 
 
 def _main(args) -> int:
-    try:
-        address = parse_scheduler(args.scheduler)
-    except ValueError as exc:
-        print(f"bsp-convert: {exc}", file=sys.stderr)
-        return 2
-    if address is None:
-        if args.shards is not None:
-            print("bsp-convert: --shards needs --scheduler dask", file=sys.stderr)
-            return 2
-        return _convert_cli(args, None)
-    try:
-        with open_client(address, needed_by="bsp-convert --scheduler dask") as client:
-            return _convert_cli(args, client)
-    except (ImportError, OSError) as exc:
-        print(f"bsp-convert: {exc}", file=sys.stderr)
-        return 1
+    return run_on_scheduler(args.scheduler, "bsp-convert", lambda c: _convert_cli(args, c))
 
 
 def _convert_cli(args, client) -> int:
+    if client is None and args.shards is not None:
+        print("bsp-convert: --shards needs --scheduler dask", file=sys.stderr)
+        return 2
     try:
         with warnings.catch_warnings():  # printed below, once, in the summary
             warnings.simplefilter("ignore", UserWarning)

@@ -85,21 +85,9 @@ def _print_summary(s: dict) -> None:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    from .._dask import open_client, parse_scheduler
+    from .._dask import run_on_scheduler
 
-    try:
-        address = parse_scheduler(args.scheduler)
-    except ValueError as e:
-        print(f"bsp-synth: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    if address is None:
-        return _generate(args, None)
-    try:
-        with open_client(address, needed_by="bsp-synth --scheduler dask") as client:
-            return _generate(args, client)
-    except (ImportError, OSError) as e:
-        print(f"bsp-synth: {e}", file=sys.stderr)
-        return EXIT_ERROR
+    return run_on_scheduler(args.scheduler, "bsp-synth", lambda c: _generate(args, c))
 
 
 def _generate(args, client) -> int:
