@@ -74,8 +74,7 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
     ``metrics.json``."""
     if split not in SPLIT_STAGES:
         raise ValueError(f"split must be one of {list(SPLIT_STAGES)}, got {split!r}")
-    from .train import (make_datamodule, make_trainer, prepare_data,
-                        resolve_precision)
+    from .train import make_datamodule, make_trainer, native_bf16, prepare_data, resolve_precision
 
     module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size, workers=workers,
                                      accelerator=accelerator, noise=noise, mjp=mjp,
@@ -87,7 +86,7 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
     dm = make_datamodule(cfg, h5)
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
     precision = resolve_precision(cfg["precision"], cfg["accelerator"])
-    if precision.startswith("bf16") and not _fast_bf16(cfg["accelerator"]):
+    if precision.startswith("bf16") and not native_bf16(cfg["accelerator"]):
         precision = "32"  # e.g. a bf16 GPU run evaluated on a CPU without bf16 instructions
     trainer = make_trainer(cfg, None, precision, fit=False)
     if split == "test":
@@ -168,14 +167,3 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
-
-
-def _fast_bf16(accelerator: str) -> bool:
-    """Whether bf16 runs natively here: a CUDA device, or a CPU with AVX512-BF16/AMX."""
-    import torch
-
-    if accelerator != "cpu" and torch.cuda.is_available():
-        return True
-    from ..models.lstm import _cpu_bf16
-
-    return _cpu_bf16()

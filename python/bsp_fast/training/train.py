@@ -141,21 +141,26 @@ def resolve_precision(precision: str, accelerator: str) -> str:
     return "32"
 
 
-def check_precision(module, precision: str, accelerator: str) -> None:
+def native_bf16(accelerator: str) -> bool:
+    """Whether bf16 arithmetic runs natively where ``accelerator`` trains: a CUDA device,
+    or a CPU with AVX512-BF16/AMX."""
+    import torch
+
+    if accelerator != "cpu" and torch.cuda.is_available():
+        return True
+    from ..models.lstm import _cpu_bf16
+
+    return _cpu_bf16()
+
+
+def check_precision(precision: str, accelerator: str) -> None:
     """bf16 on a CPU without bf16 instructions (AVX512-BF16/AMX): allowed, with a warning.
     oneDNN then converts to and from bf16 around float32 arithmetic (measured 5-17x
     slower than 32 on an AVX2 CPU) and has no bf16 LSTM kernel, so the models' LSTM
     layers run in float32 inside autocast (``models.lstm``)."""
     import warnings
 
-    import torch
-
-    on_cpu = accelerator == "cpu" or not torch.cuda.is_available()
-    if not (precision.startswith("bf16") and on_cpu):
-        return
-    from ..models.lstm import _cpu_bf16
-
-    if not _cpu_bf16():
+    if precision.startswith("bf16") and not native_bf16(accelerator):
         warnings.warn(f"--precision {precision} on a CPU without bf16 instructions "
                       "(AVX512-BF16/AMX): expect it to be several times slower than "
                       "--precision 32 (docs/training.md, Precision); LSTM layers run in "
@@ -262,7 +267,7 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
                                            config=cfg)
     except (ValueError, TypeError) as exc:
         raise C.ConfigError(f"model {cfg['model']!r}: {exc}") from None
-    check_precision(module, precision, cfg["accelerator"])
+    check_precision(precision, cfg["accelerator"])
     ckpt_path = None
     if resume is not None:
         ckpt_path = resume["ckpt"]
