@@ -18,10 +18,11 @@ import re
 import subprocess
 import sys
 import tempfile
-import zlib
 
 HERE = pathlib.Path(__file__).resolve().parent
 CORPUS = HERE / "corpus"
+sys.path.insert(0, str(HERE.parent / "python"))  # the tests' data helpers
+from bsp_testdata import png_chunk, png_chunks  # noqa: E402
 
 
 # ---------------------------------------------------------------- helpers
@@ -50,32 +51,18 @@ def set_cell(text: bytes, column: str, line: int, value: bytes) -> bytes:
     return b"\n".join(lines)
 
 
-def chunk(kind: bytes, data: bytes) -> bytes:
-    return len(data).to_bytes(4, "big") + kind + data + zlib.crc32(kind + data).to_bytes(4, "big")
-
-
-def chunks(data: bytes) -> list[tuple[int, bytes, int]]:
-    """(offset, type, data length) of every chunk of a PNG."""
-    pos, out = 8, []
-    while pos + 12 <= len(data):
-        n = int.from_bytes(data[pos:pos + 4], "big")
-        out.append((pos, data[pos + 4:pos + 8], n))
-        pos += 12 + n
-    return out
-
-
 def replace_chunk(data: bytes, index: int, kind: bytes, body: bytes) -> bytes:
-    pos, _, n = chunks(data)[index]
-    return data[:pos] + chunk(kind, body) + data[pos + 12 + n:]
+    pos, _, n = png_chunks(data)[index]
+    return data[:pos] + png_chunk(kind, body) + data[pos + 12 + n:]
 
 
 def body(data: bytes, index: int) -> bytes:
-    pos, _, n = chunks(data)[index]
+    pos, _, n = png_chunks(data)[index]
     return data[pos + 8:pos + 8 + n]
 
 
 def first(data: bytes, kind: bytes, nth: int = 0) -> int:
-    return [i for i, (_, k, _) in enumerate(chunks(data)) if k == kind][nth]
+    return [i for i, (_, k, _) in enumerate(png_chunks(data)) if k == kind][nth]
 
 
 def be32(v: int) -> bytes:
@@ -137,20 +124,20 @@ def apng_seeds(apng: bytes) -> dict[str, bytes]:
         return replace_chunk(apng, ihdr, b"IHDR", be32(width) + be32(height) + body(apng, ihdr)[8:])
 
     fctl2 = first(apng, b"fcTL", 2)
-    pos2 = chunks(apng)[fctl2][0]
-    second_ihdr = apng[:pos2] + chunk(b"IHDR", be32(2 * w) + be32(2 * h) + body(apng, ihdr)[8:]) \
+    pos2 = png_chunks(apng)[fctl2][0]
+    second_ihdr = apng[:pos2] + png_chunk(b"IHDR", be32(2 * w) + be32(2 * h) + body(apng, ihdr)[8:]) \
         + apng[pos2:]
     fc = bytearray(body(apng, fctl2))  # seq, w, h, x, y, delay num/den, dispose, blend
     outside = bytes(fc[:12]) + be32(w - 2) + bytes(fc[16:])  # x offset: right edge past w
     fc_big = bytes(fc[:4]) + be32(w + 5) + bytes(fc[8:])
     actl = first(apng, b"acTL")
     iend = first(apng, b"IEND")
-    iend_pos = chunks(apng)[iend][0]
+    iend_pos = png_chunks(apng)[iend][0]
     pal = first(apng, b"PLTE")
-    crc_pos = chunks(apng)[fctl2][0] + 8 + chunks(apng)[fctl2][2]
+    crc_pos = png_chunks(apng)[fctl2][0] + 8 + png_chunks(apng)[fctl2][2]
     bad_crc = apng[:crc_pos] + bytes([apng[crc_pos] ^ 0x55]) + apng[crc_pos + 1:]
-    fctl5 = chunks(apng)[first(apng, b"fcTL", 5)][0]
-    plain = apng[:8] + b"".join(apng[p:p + 12 + n] for p, k, n in chunks(apng)
+    fctl5 = png_chunks(apng)[first(apng, b"fcTL", 5)][0]
+    plain = apng[:8] + b"".join(apng[p:p + 12 + n] for p, k, n in png_chunks(apng)
                                  if k not in (b"acTL", b"fcTL", b"fdAT"))
     return {
         "synth.apng": apng,
@@ -174,9 +161,10 @@ def apng_seeds(apng: bytes) -> dict[str, bytes]:
     }
 
 
-def video_seeds(mp4: bytes, tmp: pathlib.Path) -> dict[str, bytes]:
-    foreign = tmp / "foreign.mp4"
-    foreign.write_bytes(mp4)
+def video_seeds(mp4: bytes) -> dict[str, bytes]:
+    # a fixed absolute path (the seeds stay byte-identical across runs); the reader must
+    # refuse these containers before any named file matters
+    foreign = "/tmp/bsp_fuzz/foreign.mp4"
     mdat = mp4.find(b"mdat")
     flipped = bytearray(mp4)
     for i in range(mdat + 40, min(len(mp4), mdat + 400), 37):
@@ -208,7 +196,7 @@ def main() -> int:
         apng = next(p for p in clips if p.suffix == ".apng").read_bytes()
         mp4 = next(p for p in clips if p.suffix == ".mp4").read_bytes()
         corpora = {"csv": csv_seeds(text), "apng": apng_seeds(apng),
-                   "video": video_seeds(mp4, tmp)}
+                   "video": video_seeds(mp4)}
     for name, seeds in corpora.items():
         d = CORPUS / name
         d.mkdir(parents=True, exist_ok=True)  # found_* files (fuzzer findings) are kept

@@ -6,6 +6,8 @@ pandas wrote the original (Python str() of float lists).
 """
 from __future__ import annotations
 
+import zlib
+
 import numpy as np
 
 import bsp_fast as bf
@@ -90,3 +92,33 @@ def write_dataset(root, rows, **kw):
     root.mkdir(parents=True, exist_ok=True)
     (root / "data.csv").write_bytes(csv_text(rows, **kw).encode())
     return root
+
+
+# ---------------------------------------------------------------- PNG / APNG bytes
+def png_chunk(kind: bytes, data: bytes) -> bytes:
+    """One PNG chunk: length, type, data, CRC."""
+    return len(data).to_bytes(4, "big") + kind + data + zlib.crc32(kind + data).to_bytes(4, "big")
+
+
+def png_chunks(data: bytes) -> list:
+    """(offset, type, data length) of every chunk of a PNG."""
+    pos, out = 8, []
+    while pos + 12 <= len(data):
+        n = int.from_bytes(data[pos:pos + 4], "big")
+        out.append((pos, data[pos + 4:pos + 8], n))
+        pos += 12 + n
+    return out
+
+
+def corrupt_apng_frame(path, j: int) -> None:
+    """Flips a byte in the middle of APNG frame j's image data (j >= 1: its fdAT chunk), so
+    that its CRC check fails there."""
+    data = bytearray(path.read_bytes())
+    fctl = -1
+    for pos, kind, n in png_chunks(bytes(data)):
+        fctl += kind == b"fcTL"
+        if kind == b"fdAT" and fctl == j:
+            data[pos + 8 + 4 + n // 2] ^= 0x55
+            path.write_bytes(bytes(data))
+            return
+    raise AssertionError(f"no fdAT for frame {j}")

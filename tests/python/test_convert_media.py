@@ -18,7 +18,7 @@ from PIL import Image
 
 import bsp_fast as bf
 from bsp_fast import conversion as cv
-from bsp_testdata import recording, write_dataset
+from bsp_testdata import corrupt_apng_frame, recording, write_dataset
 
 S = 40
 OPTS = dict(clip_length=8, clip_offset=4, crop_size=S, val_frac=0.3, test_frac=0.3)
@@ -220,22 +220,6 @@ def test_missing_mp4_fails_with_its_path_or_is_skipped(ds, converted, tmp_path):
                        capture_output=True, text=True, env={**os.environ})
     assert p.returncode == 0, p.stderr
     assert "1 bad media files left out" in p.stdout and str(mp4) in p.stdout
-
-
-def corrupt_apng_frame(path, j):
-    """Flips a data byte of APNG frame j's image data (j >= 1: its fdAT) -> CRC mismatch."""
-    data = bytearray(path.read_bytes())
-    pos, fctl = 8, -1
-    while pos < len(data):
-        n = int.from_bytes(data[pos:pos + 4], "big")
-        kind = bytes(data[pos + 4:pos + 8])
-        fctl += kind == b"fcTL"
-        if kind == b"fdAT" and fctl == j:
-            data[pos + 8 + 4 + n // 2] ^= 0x55
-            path.write_bytes(bytes(data))
-            return
-        pos += 12 + n
-    raise AssertionError(f"no fdAT for frame {j}")
 
 
 def test_apng_damaged_mid_file_fails_or_is_left_out_after_a_second_pass(ds, converted, tmp_path):

@@ -20,6 +20,7 @@ distributed = pytest.importorskip("distributed")
 import bsp_fast as bf  # noqa: E402
 from bsp_fast import conversion as cv  # noqa: E402
 from bsp_fast.convert_dask import shard_dir  # noqa: E402
+from bsp_testdata import corrupt_apng_frame  # noqa: E402
 
 OPTS = dict(clip_length=8, clip_offset=4, crop_size=24, val_frac=0.3, test_frac=0.3, seed=5)
 SPLITS = ("train", "val", "test")
@@ -179,22 +180,6 @@ def test_bad_media_same_error_or_left_out_the_same(ds, single, client, tmp_path)
     assert a["media"]["bad"] == [tuple(x) for x in b["media"]["bad"]] and len(a["media"]["bad"]) == 1
     assert a["media"]["passes"] == b["media"]["passes"] == 1
     assert_same(tmp_path / "a.h5", out)
-
-
-def corrupt_apng_frame(path, j):
-    """Flips a byte of APNG frame j's data (its fdAT chunk): the CRC check fails there."""
-    data = bytearray(path.read_bytes())
-    pos, fctl = 8, -1
-    while pos < len(data):
-        n = int.from_bytes(data[pos:pos + 4], "big")
-        kind = bytes(data[pos + 4:pos + 8])
-        fctl += kind == b"fcTL"
-        if kind == b"fdAT" and fctl == j:
-            data[pos + 8 + 4 + n // 2] ^= 0x55
-            path.write_bytes(bytes(data))
-            return
-        pos += 12 + n
-    raise AssertionError(f"no fdAT for frame {j}")
 
 
 def test_file_damaged_mid_decode_same_error_or_second_pass(ds, single, client, tmp_path):

@@ -9,7 +9,7 @@ import pytest
 import bsp_fast as bf
 from bsp_fast import conversion as cv
 from bsp_fast.media import ApngReader
-from bsp_testdata import recording, write_dataset
+from bsp_testdata import png_chunk as chunk, png_chunks as chunks, recording, write_dataset
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")  # tiny datasets: empty splits
 
@@ -162,23 +162,6 @@ def mds(media_ds, tmp_path):
 
 def apng_of(ds):
     return sorted((ds / "clips").glob("*.apng"))[0]
-
-
-def chunk(kind: bytes, data: bytes) -> bytes:
-    import zlib
-
-    return (len(data).to_bytes(4, "big") + kind + data
-            + zlib.crc32(kind + data).to_bytes(4, "big"))
-
-
-def chunks(data: bytes):
-    """(offset, type, length) of every chunk."""
-    pos, out = 8, []
-    while pos + 12 <= len(data):
-        n = int.from_bytes(data[pos:pos + 4], "big")
-        out.append((pos, data[pos + 4:pos + 8], n))
-        pos += 12 + n
-    return out
 
 
 def ihdr(w, h):
