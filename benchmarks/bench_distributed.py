@@ -32,19 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
+# generated once, cached under --dir by --clips, --frames and --seed (shared with that script)
+from bench_convert_media import dataset
+
 OPTS = dict(clip_length=16, clip_offset=6, crop_size=128)
-
-
-def dataset(args) -> Path:
-    root = Path(args.dir) / f"synth-{args.clips}x{args.frames}-1600x600-seed{args.seed}"
-    if not (root / "data.csv").is_file():
-        from bsp_fast.synth import generate
-
-        t0 = time.perf_counter()
-        generate(root, "sample", clips=args.clips, frames=args.frames, size="1600x600",
-                 seed=args.seed, workers=2, progress=False, force=True)
-        print(f"generated {root} in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
-    return root
 
 
 def cpu_seconds() -> float:

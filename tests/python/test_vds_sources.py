@@ -12,43 +12,11 @@ import pytest
 from bsp_fast.data import MissingShardError, check_virtual_sources, open_clip_file
 from bsp_fast.data import cache as _cache
 from bsp_fast.data import vds as _vds
+from bsp_fast.convert_dask import _write_virtual
 from bsp_fast.data.testing import write_clip_file
 
 torch = pytest.importorskip("torch")
 torch.set_num_threads(1)
-
-
-def _copy_attrs(src, dst):
-    for k, v in src.attrs.items():
-        dst.attrs[k] = v
-
-
-def write_virtual(out: Path, parts: list, rel: list) -> None:
-    """``out``: shard 0's attributes and, for every dataset, a virtual dataset that
-    concatenates the shards' along axis 0, each source named by ``rel`` (as stored)."""
-    files = [h5py.File(p, "r") for p in parts]
-    try:
-        names = []
-        files[0].visit(names.append)
-        with h5py.File(out, "w", libver="latest") as f:
-            _copy_attrs(files[0], f)
-            for name in names:
-                obj = files[0][name]
-                if isinstance(obj, h5py.Group):
-                    _copy_attrs(obj, f.require_group(name))
-                    continue
-                pieces = [p[name] for p in files]
-                total = sum(d.shape[0] for d in pieces)
-                layout = h5py.VirtualLayout((total,) + obj.shape[1:], obj.dtype)
-                at = 0
-                for r, d in zip(rel, pieces):
-                    layout[at:at + d.shape[0]] = h5py.VirtualSource(r, name, shape=d.shape,
-                                                                    dtype=d.dtype)
-                    at += d.shape[0]
-                f.create_virtual_dataset(name, layout)
-    finally:
-        for p in files:
-            p.close()
 
 
 @pytest.fixture
@@ -60,7 +28,7 @@ def pair(tmp_path):
     for k, p in enumerate(parts):
         write_clip_file(p, clips=(6, 5, 4), clip_length=8, seed=k + 1)
     out = tmp_path / "clips.h5"
-    write_virtual(out, parts, [f"clips.h5.shards/{p.name}" for p in parts])
+    _write_virtual(out, shards, shards.name, len(parts))  # what bsp-convert --scheduler dask writes
     _vds._checked.clear()
     return out, parts
 
