@@ -125,7 +125,7 @@ TEST_CASE("shard_parts: clips and whole recordings cut into K runs that cover ev
   // 70 frames: split 0 blocks of 10, 10, 10, 10; split 1 one of 5; split 2 of 20 and 5.
   const std::array<detail::FrameTable, 3> t = {table({10, 10, 10, 10}, 0, 7), table({5}, 4, 2),
                                                table({20, 5}, 5, 3)};
-  const auto two0 = detail::shard_parts(plan, t, 2, 0, 2), two1 = detail::shard_parts(plan, t, 2, 1, 2);
+  const auto two0 = detail::shard_parts(plan, t, 0, 2), two1 = detail::shard_parts(plan, t, 1, 2);
   // blocks by frames: shard 0 starts before frame 35 (blocks starting at 0, 10, 20, 30)
   CHECK(two0.blocks[0] == std::make_pair<std::size_t, std::size_t>(0, 4));
   CHECK(two0.blocks[1] == std::make_pair<std::size_t, std::size_t>(0, 0));
@@ -138,7 +138,7 @@ TEST_CASE("shard_parts: clips and whole recordings cut into K runs that cover ev
     for (int s = 0; s < 3; ++s) {
       std::size_t next_block = 0, next_clip = 0;
       for (int k = 0; k < K; ++k) {
-        const auto p = detail::shard_parts(plan, t, 2, k, K);
+        const auto p = detail::shard_parts(plan, t, k, K);
         CHECK(p.blocks[s].first == next_block);  // contiguous, in order, no gap or overlap
         CHECK(p.clips[s].first == next_clip);
         next_block = p.blocks[s].second, next_clip = p.clips[s].second;
@@ -147,7 +147,7 @@ TEST_CASE("shard_parts: clips and whole recordings cut into K runs that cover ev
       CHECK(next_clip == plan.splits[s].size());
     }
   }
-  CHECK_THROWS_AS(detail::shard_parts(plan, t, 2, 2, 2), std::invalid_argument);
+  CHECK_THROWS_AS(detail::shard_parts(plan, t, 2, 2), std::invalid_argument);
 }
 
 TEST_CASE("slice_table: rows rebased per shard, clip_frames keep whole-table numbers") {

@@ -321,7 +321,7 @@ ConvertReport convert_shard(const std::string& csv_path, const std::string& out_
     media.files = detail::media_files(table, plan, media_root(csv_path));  // unsafe paths first
     for (int s = 0; s < 3; ++s) full[s] = detail::plan_frame_table(plan, plan.splits[s], L);
   }
-  const detail::ShardParts parts = detail::shard_parts(plan, full, L, opt.shard.index, opt.shard.count);
+  const detail::ShardParts parts = detail::shard_parts(plan, full, opt.shard.index, opt.shard.count);
   std::array<std::vector<Clip>, 3> clips;
   for (std::size_t s = 0; s < 3; ++s) {
     const auto [c0, c1] = parts.clips[s];

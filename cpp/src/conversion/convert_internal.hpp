@@ -104,8 +104,8 @@ std::vector<MediaFailure> write_media(const std::array<const h5::Group*, 3>& gro
 struct ShardParts {
   std::array<std::pair<std::size_t, std::size_t>, 3> clips, blocks;
 };
-ShardParts shard_parts(const Plan& plan, const std::array<FrameTable, 3>& tables, int L,
-                       int index, int count);
+ShardParts shard_parts(const Plan& plan, const std::array<FrameTable, 3>& tables, int index,
+                       int count);
 // The blocks and the clips' clip_frames (still numbered in the whole table) of one shard.
 FrameTable slice_table(const FrameTable& full, std::pair<std::size_t, std::size_t> blocks,
                        std::pair<std::size_t, std::size_t> clips, int L);

@@ -9,8 +9,8 @@
 
 namespace bsp::detail {
 
-ShardParts shard_parts(const Plan& plan, const std::array<FrameTable, 3>& tables, int /*L*/,
-                       int index, int count) {
+ShardParts shard_parts(const Plan& plan, const std::array<FrameTable, 3>& tables, int index,
+                       int count) {
   if (count < 1 || index < 0 || index >= count)
     throw std::invalid_argument("shard index must lie in [0, " + std::to_string(count) +
                                 "), got " + std::to_string(index));
