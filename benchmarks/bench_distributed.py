@@ -71,7 +71,7 @@ def same(a: Path, b: Path) -> bool:
 def bench_synth(args) -> int:
     import filecmp
 
-    from bsp_fast._dask import open_client
+    from bsp_fast.dask_cluster import open_client
     from bsp_fast.synth import generate
 
     out = Path(args.dir) / "synth-dist"
@@ -116,7 +116,7 @@ def main(argv=None) -> int:
     import warnings
 
     import bsp_fast as bf
-    from bsp_fast._dask import open_client
+    from bsp_fast.dask_cluster import open_client
 
     warnings.filterwarnings("ignore", message="bsp_fast.convert")
 

@@ -12,7 +12,6 @@ import math
 import numpy as np
 
 from ._native import core as _core
-from . import skeleton as _sk
 
 __all__ = [
     "rotation_matrix", "rotation_to_euler", "compose", "invert", "transform_points",
@@ -106,7 +105,7 @@ def forward_kinematics(relative, root=None, parents=None) -> np.ndarray:
     ``relative``. ``parents`` defaults to the 26-joint CARLA skeleton; any tree whose
     parents come before their children works.
     """
-    par = np.asarray(_sk.PARENTS if parents is None else parents)
+    par = np.asarray(_core.PARENTS if parents is None else parents)
     if par.ndim != 1 or par.dtype.kind not in "iu":
         raise ValueError(f"parents: expected a 1-D integer sequence, got {par!r}")
     par = np.ascontiguousarray(par, dtype=np.int32)

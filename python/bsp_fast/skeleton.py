@@ -11,6 +11,7 @@ from importlib import resources
 import numpy as np
 
 from ._native import core as _core
+from .geometry import forward_kinematics
 
 JOINT_NAMES: tuple = tuple(_core.JOINT_NAMES)
 NUM_JOINTS = len(JOINT_NAMES)
@@ -110,8 +111,6 @@ def structure_parents() -> tuple:
 
 @functools.lru_cache(maxsize=None)
 def _hips_neck(stem: str) -> float:
-    from .geometry import forward_kinematics
-
     joints = forward_kinematics(reference_pose(stem))[:, :3]
     return float(np.linalg.norm(joints[NECK] - joints[HIPS]))
 

@@ -190,7 +190,7 @@ def test_interrupted_conversion_leaves_no_file(ds, tmp_path, monkeypatch):
         open(tmp, "wb").write(b"half")
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cv._core, "convert_csv", boom)
+    monkeypatch.setattr(cv.api._core, "convert_csv", boom)
     with pytest.raises(KeyboardInterrupt):
         cv.convert(ds, out, media=False)
     assert not out.exists() and not list(tmp_path.iterdir())

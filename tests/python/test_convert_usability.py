@@ -8,7 +8,7 @@ import h5py
 import pytest
 
 from bsp_fast import conversion as cv
-from bsp_fast.convert_report import ProgressBars
+from bsp_fast.conversion.report import ProgressBars
 from bsp_testdata import recording, write_dataset
 
 
@@ -117,13 +117,13 @@ def test_progress_bars_end_full_with_rates_of_the_real_speed():
 
 def test_convert_progress_default_follows_the_terminal(one_class, tmp_path, monkeypatch):
     seen = {}
-    real = cv._run
+    real = cv.api._run
 
     def spy(csv, tmp, options, show_progress):
         seen["progress"] = show_progress
         return real(csv, tmp, options, False)
 
-    monkeypatch.setattr(cv, "_run", spy)
+    monkeypatch.setattr(cv.api, "_run", spy)
 
     class Tty(io.StringIO):
         def isatty(self):

@@ -19,7 +19,7 @@ distributed = pytest.importorskip("distributed")
 
 import bsp_fast as bf  # noqa: E402
 from bsp_fast import conversion as cv  # noqa: E402
-from bsp_fast.convert_dask import shard_dir  # noqa: E402
+from bsp_fast.conversion.sharded import shard_dir  # noqa: E402
 from bsp_testdata import corrupt_apng_frame  # noqa: E402
 
 OPTS = dict(clip_length=8, clip_offset=4, crop_size=24, val_frac=0.3, test_frac=0.3, seed=5)

@@ -284,7 +284,7 @@ class _InterruptingBars:
 def test_ctrl_c_stops_and_joins_the_conversion(mds, tmp_path, monkeypatch):
     import threading
 
-    monkeypatch.setattr(cv, "ProgressBars", _InterruptingBars)
+    monkeypatch.setattr(cv.report, "ProgressBars", _InterruptingBars)
     with pytest.raises(KeyboardInterrupt):
         cv.convert(mds, tmp_path / "o.h5", clip_length=10, crop_size=16, threads=1,
                    progress=True)
@@ -306,8 +306,8 @@ class Bars:
     def poll(self, stage, total, done): os.kill(os.getpid(), signal.SIGTERM)
     def close(self, completed): pass
 
-cv.ProgressBars = Bars
-cv._is_terminal = lambda stream: True
+cv.report.ProgressBars = Bars
+cv.api._is_terminal = lambda stream: True
 sys.exit(cv.main(["--clip-length", "10", "--crop-size", "16", "--threads", "1",
                   {str(mds)!r}, {str(tmp_path / "o.h5")!r}]))
 """

@@ -11,8 +11,8 @@ import pytest
 
 from bsp_fast.data import MissingShardError, check_virtual_sources, open_clip_file
 from bsp_fast.data import cache as _cache
-from bsp_fast.data import vds as _vds
-from bsp_fast.convert_dask import _write_virtual
+from bsp_fast.conversion import vds as _vds
+_write_virtual = _vds.write_virtual
 from bsp_fast.data.testing import write_clip_file
 
 torch = pytest.importorskip("torch")

@@ -5,16 +5,16 @@ media, unsafe paths, ...) or whose pedestrian is never visible in the masks, wit
 media files; rows repeating an earlier row's key; annotated rows with no pedestrian pixel
 near the joints; media files no row references. Everything else is copied byte for byte
 (data.csv keeps the original bytes of every kept line). ``bsp-check-fix.tsv`` in the copy
-lists every dropped item and why. The copy is built in ``OUT_DIR.tmp-*`` and renamed.
+lists every dropped item and why. The copy is built in ``.OUT_DIR.tmp-*`` and renamed.
 """
 from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 
 import numpy as np
 
+from ..atomic import atomic_output
 from .core import dataset_paths, run_check
 from .rows import MEDIA_SUFFIXES, event_camera_file
 
@@ -52,19 +52,13 @@ def fix_dataset(dataset, out_dir, *, threads: int | None = None, force: bool = F
     keep_files, drop_files = _plan_files(root, csv, recs, drop_row, table, log)
     parent = os.path.dirname(out)
     os.makedirs(parent, exist_ok=True)
-    tmp = tempfile.mkdtemp(prefix=os.path.basename(out) + ".tmp-", dir=parent)
-    try:
+    with atomic_output(out, force=force, folder=True) as tmp_path:
+        tmp = str(tmp_path)
         os.chmod(tmp, 0o755)
         _write_csv(csv, os.path.join(tmp, os.path.basename(csv)), table, drop_row)
         for rel in keep_files:
             _copy(os.path.join(root, rel), os.path.join(tmp, rel), link)
         _write_log(os.path.join(tmp, LOG_NAME), log)
-        if os.path.exists(out):
-            shutil.rmtree(out)
-        os.rename(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     reasons: dict = {}
     for what, _, why in log:
         k = f"{what}: {why.split(':')[0]}"

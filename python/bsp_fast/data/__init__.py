@@ -28,7 +28,7 @@ from .transforms import (
 )
 from .functional import denormalize_hips_neck_3d
 from .camera import camera_intrinsics, carla_to_opencv, focal_length, opencv_to_carla
-from .vds import MissingShardError, check_virtual_sources, open_clip_file
+from ..conversion.vds import MissingShardError, check_virtual_sources, open_clip_file
 
 __all__ = [
     "ClipDataset", "FrameDataset", "BSPDataModule", "ContiguousBatchSampler", "IndexBatch",

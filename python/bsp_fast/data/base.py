@@ -21,6 +21,7 @@ import zlib
 import numpy as np
 
 from .._extras import require
+from ..defaults import SEED
 
 torch = require("torch")
 import torch.utils.data  # noqa: E402
@@ -32,7 +33,7 @@ from .transport import pack_batch
 __all__ = ["SplitDataset", "SPLITS", "DEFAULT_EVAL_SEED"]
 
 SPLITS = ("train", "val", "test")
-DEFAULT_EVAL_SEED = 22742
+DEFAULT_EVAL_SEED = SEED
 _SPLIT_CODE = {s: i for i, s in enumerate(SPLITS)}
 
 _open_datasets: "weakref.WeakSet[SplitDataset]" = weakref.WeakSet()
@@ -126,7 +127,7 @@ class SplitDataset(torch.utils.data.Dataset):
     # ----------------------------------------------------------------- file handling
     def _h5(self):
         if self._file is None or self._pid != os.getpid():
-            from .vds import open_clip_file
+            from ..conversion.vds import open_clip_file
 
             self._file, self._pid, self._ds = open_clip_file(self.h5_path), os.getpid(), {}
             _open_datasets.add(self)

@@ -55,7 +55,7 @@ def crc32_file(path: Path, chunk: int = 1 << 24) -> int:
 
 def stale_reason(h5_path: Path, settings: dict, csv: Path) -> str | None:
     """Why ``h5_path`` is not the conversion of ``csv`` with ``settings`` (None: reusable)."""
-    from .vds import MissingShardError, open_clip_file
+    from ..conversion.vds import MissingShardError, open_clip_file
 
     try:
         with open_clip_file(h5_path) as f:

@@ -10,6 +10,8 @@ import os
 import sys
 from pathlib import Path
 
+from .. import conversion
+from ..defaults import CONVERT as DEFAULTS
 from . import cache as _cache
 from .datasets import DEFAULT_EVAL_SEED, SPLITS, TASKS, ClipDataset
 
@@ -25,14 +27,9 @@ except ImportError:  # pragma: no cover - depends on the environment
 
 __all__ = ["BSPDataModule", "LIGHTNING"]
 
-BENCHMARK = dict(clip_length=16, clip_offset=6, benchmark=True, balance=True)
+BENCHMARK = dict(clip_length=DEFAULTS["benchmark_clip_length"],
+                 clip_offset=DEFAULTS["benchmark_clip_offset"], benchmark=True, balance=True)
 _NOT_OUTPUT = ("threads", "verify", "force", "progress", "strict")  # convert options only
-
-
-def _conversion():
-    import importlib
-
-    return importlib.import_module("bsp_fast.conversion")
 
 
 def _plain_value(v) -> bool:
@@ -100,7 +97,7 @@ class BSPDataModule(_Base):
         self.dataset_dir = None if dataset_dir is None else Path(dataset_dir)
         self.task, self.benchmark_windows, self.balance = task, bool(benchmark), bool(balance)
         self._explicit = dict(clip_length=clip_length, clip_offset=clip_offset)
-        L = clip_length or (BENCHMARK["clip_length"] if benchmark else 30)
+        L = clip_length or (BENCHMARK["clip_length"] if benchmark else DEFAULTS["clip_length"])
         self.clip_length = L
         self.clip_offset = clip_offset or (BENCHMARK["clip_offset"] if benchmark else L)
         self.convert_options = dict(convert_options or {})
@@ -155,7 +152,7 @@ class BSPDataModule(_Base):
 
     def settings(self) -> dict:
         """The resolved conversion settings this module asks for (needs ``dataset_dir``)."""
-        return _conversion().conversion_settings(self.dataset_dir, **self._convert_kwargs())
+        return conversion.conversion_settings(self.dataset_dir, **self._convert_kwargs())
 
     @property
     def h5_path(self) -> Path:
@@ -170,7 +167,7 @@ class BSPDataModule(_Base):
         compare it with)."""
         if self.dataset_dir is None:
             return None
-        _, csv = _conversion()._dataset_csv(self.dataset_dir)
+        _, csv = conversion.dataset_csv(self.dataset_dir)
         return _cache.stale_reason(self.h5_path, self.settings(), csv)
 
     def prepare_data(self) -> None:
@@ -182,7 +179,7 @@ class BSPDataModule(_Base):
             if why is None:
                 self.reused = True
                 if not self._given_h5 and self.dataset_dir is not None:
-                    _, csv = _conversion()._dataset_csv(self.dataset_dir)
+                    _, csv = conversion.dataset_csv(self.dataset_dir)
                     if csv.stat().st_mtime_ns > path.stat().st_mtime_ns:
                         os.utime(path)  # data.csv was CRC-checked: not again next time
                 self._say(f"reusing {path} (same conversion options and data.csv)")
@@ -197,7 +194,6 @@ class BSPDataModule(_Base):
                                     "convert it from")
         else:
             self._say(f"converting {self.dataset_dir} -> {path} (first use of these options)")
-        conversion = _conversion()
         self.conversion_report = conversion.convert(
             self.dataset_dir, path, force=True,
             progress=None if self.verbose and _rank_zero() else False,

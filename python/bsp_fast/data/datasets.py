@@ -55,7 +55,7 @@ class ClipDataset(SplitDataset):
     crops on [0, 1], ``mean``/``std`` normalise them per channel. Randomness depends on
     ``(seed, epoch, batch indices)``; the train split's ``seed`` defaults to one derived
     from torch's initial seed (``seed_everything`` fixes it), val and test use ``seed``
-    (default 22742) with epoch 0, so a given batch of indices always gets the same inputs.
+    (default ``bsp_fast.defaults.SEED``) with epoch 0, so a given batch of indices always gets the same inputs.
     ``balance`` keeps the first min-class-count clips of each class (stored order).
     ``lifting_target`` picks the 3D frame: ``absolute`` (walker actor / component space),
     ``world`` or ``camera`` (CARLA camera axes, x forward). ``with_pixels`` adds the clean
@@ -101,7 +101,7 @@ class ClipDataset(SplitDataset):
 
     # ----------------------------------------------------------------- header and meta
     def _read_header(self, indices, balance: bool) -> None:
-        from .vds import open_clip_file
+        from ..conversion.vds import open_clip_file
 
         with open_clip_file(self.h5_path) as f:
             version = int(f.attrs.get("schema_version", -1))

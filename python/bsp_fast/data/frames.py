@@ -46,7 +46,7 @@ class FrameDataset(SplitDataset):
         self._read_header(indices)
 
     def _read_header(self, indices) -> None:
-        from .vds import open_clip_file
+        from ..conversion.vds import open_clip_file
 
         with open_clip_file(self.h5_path) as f:
             if int(f.attrs.get("schema_version", -1)) != 1 or self.split not in f:

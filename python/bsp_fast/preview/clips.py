@@ -35,7 +35,7 @@ def _strings(ds, sel) -> list:
 
 def read_clips(path, split: str, sel=None, n: int = 16, seed=None) -> dict:
     """The arrays a sheet needs for clips `sel` (or the first / `seed`-random `n`)."""
-    from ..data.vds import open_clip_file
+    from ..conversion.vds import open_clip_file
 
     if split not in SPLITS:
         raise ValueError(f"split must be one of {', '.join(SPLITS)}; got {split!r}")

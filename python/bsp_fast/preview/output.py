@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import itertools
 import os
-import tempfile
 
 import cv2
 import numpy as np
 
+from ..atomic import write_bytes
 from ..media import VideoWriter
 
 FORMATS = ("png", "mp4")
@@ -38,18 +38,7 @@ def write_png(path, image: np.ndarray) -> None:
                             [cv2.IMWRITE_PNG_COMPRESSION, 9])
     if not ok:
         raise RuntimeError(f"OpenCV could not encode {path}")
-    path = os.fspath(path)
-    fd, tmp = tempfile.mkstemp(prefix=os.path.basename(path) + ".tmp-",
-                               dir=os.path.dirname(os.path.abspath(path)))
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data.tobytes())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_bytes(path, data.tobytes())
 
 
 def even_pad(image: np.ndarray) -> np.ndarray:

@@ -25,7 +25,7 @@ def parse_size(size) -> tuple:
 
 
 def read_clip(path, split: str, clip: int, space: str) -> dict:
-    from ..data.vds import open_clip_file
+    from ..conversion.vds import open_clip_file
 
     if split not in SPLITS:
         raise ValueError(f"split must be one of {', '.join(SPLITS)}; got {split!r}")

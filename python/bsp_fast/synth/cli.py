@@ -26,7 +26,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Exit codes: 0 success, 1 generation error, 2 bad option or config, 3 OUT_DIR "
                "exists (use --force), 130 interrupted.")
     p.add_argument("out_dir", metavar="OUT_DIR", help="output directory (must not exist "
-                   "unless --force); built as OUT_DIR.tmp-* and renamed when complete")
+                   "unless --force); built as .OUT_DIR.tmp-* and renamed when complete")
     p.add_argument("--preset", choices=("sample", "medium", "full"), default="sample",
                    help=f"sample: {_preset('sample')} (seconds); medium: {_preset('medium')} "
                         "(the report's experiments on 2 cores, under 10 min); full: "
@@ -85,7 +85,7 @@ def _print_summary(s: dict) -> None:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    from .._dask import run_on_scheduler
+    from ..dask_cluster import run_on_scheduler
 
     return run_on_scheduler(args.scheduler, "bsp-synth", lambda c: _generate(args, c))
 

@@ -2,7 +2,7 @@
 
 Each clip is made by one worker (media written straight into the output tree, its CSV rows
 into a per-clip part file); the parent appends the parts to data.csv in clip order. The
-output is built in ``OUT_DIR.tmp-*`` and renamed when complete, so an interrupted run never
+output is built in ``.OUT_DIR.tmp-*`` and renamed when complete, so an interrupted run never
 leaves a half-written dataset under OUT_DIR. The same seed gives byte-identical files
 whatever the number of workers.
 """
@@ -12,9 +12,9 @@ import concurrent.futures as cf
 import multiprocessing
 import os
 import shutil
-import tempfile
 import time
 
+from ..atomic import atomic_output
 from .config import SynthConfig, load_yaml_config, make_config
 
 PARTS = ".parts"
@@ -152,23 +152,14 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
     workers = min(workers, n)
     parent = os.path.dirname(out_dir)
     os.makedirs(parent, exist_ok=True)
-    tmp = tempfile.mkdtemp(prefix=os.path.basename(out_dir) + ".tmp-", dir=parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; a dataset is not
-    try:
+    with atomic_output(out_dir, force=force, folder=True) as tmp_path:
+        tmp = str(tmp_path)
         if not cfg.poses_only:
             os.makedirs(os.path.join(tmp, "clips"))
         os.makedirs(os.path.join(tmp, PARTS))
         stats = _run_clips(cfg, tmp, workers, progress, client)
         _write_config(cfg, tmp, __version__)
         shutil.rmtree(os.path.join(tmp, PARTS))
-        if os.path.exists(out_dir):
-            shutil.rmtree(out_dir)
-        os.rename(tmp, out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return _summary(cfg, stats, time.perf_counter() - t0, out_dir)
 
 
@@ -180,7 +171,7 @@ def _write_config(cfg: SynthConfig, root: str, version: str) -> None:
 
 
 def _dask_clip_job(cfg: SynthConfig, index: int, root: str) -> dict:
-    from .._dask import test_hook
+    from ..dask_cluster import test_hook
 
     test_hook("clip", index)
     return _clip_job(cfg, index, root, 1)

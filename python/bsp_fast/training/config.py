@@ -12,6 +12,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..defaults import SEED
+
 __all__ = ["OPTIONS", "TASKS", "ConfigError", "defaults", "add_options", "read_yaml",
            "normalise", "validate", "parse_hp", "write_yaml", "explicit_args"]
 
@@ -56,7 +58,7 @@ OPTIONS: tuple = (
        "checkpoint; its saved config is the base, options given here override (e.g. a "
        "larger --epochs). Without --out the run directory is updated in place", "run",
        metavar="RUN_OR_CKPT"),
-    _o("seed", "int", 22742, "seed of weights, train-time noise/augmentation and batch order; "
+    _o("seed", "int", SEED, "seed of weights, train-time noise/augmentation and batch order; "
        "the same seed on the same data gives the same metrics on CPU", "run", minimum=0),
     _o("quiet", "flag", False, "no progress bar and no tables on stdout", "run"),
     # ------------------------------------------------------------------ data
@@ -75,7 +77,7 @@ OPTIONS: tuple = (
        "dataset's config.yaml, else 90)", "data", minimum=1e-6),
     _o("crop_size", "int", 128, "side of the pedestrian crops when converting media "
        "(pose_estimation)", "data", minimum=8, metavar="S"),
-    _o("split_seed", "int", 22742, "seed of the converter's recording split", "data",
+    _o("split_seed", "int", SEED, "seed of the converter's recording split", "data",
        minimum=0),
     _o("noise", "float", 0.0, "Gaussian noise sigma in pixels on the 2D inputs (train, val "
        "and test; val/test noise is fixed by the evaluation seed)", "data", minimum=0.0,

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from . import config as C
+from ..atomic import atomic_output
 from .runs import RunError
 
 __all__ = ["predict", "main", "PredictResult"]
@@ -136,9 +136,8 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
                 strings[k] += list(meta[k])
     L = dm.datasets[split].clip_length
     sl = net.frame_slice(L)
-    tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")
     out.parent.mkdir(parents=True, exist_ok=True)
-    try:
+    with atomic_output(out, force=force) as tmp:
         with h5py.File(tmp, "w") as f:
             for k, v in parts.items():
                 f.create_dataset(k, data=np.concatenate(v))
@@ -151,10 +150,6 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
                             "clip_length": L,
                             "hparams_json": json.dumps(module.hparams["hparams"], default=str),
                             "units": "metres" if task == "lifting" else "pixels"})
-        os.replace(tmp, out)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     n = int(sum(len(v) for v in parts["label"]))
     return PredictResult(path=out, task=task, model=module.hparams["model"], split=split,
                          clips=n, datasets=sorted(list(parts) + list(strings)))

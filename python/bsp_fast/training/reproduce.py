@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from . import config as C
+from ..atomic import write_text
 from .runs import RunError, read_run
 
 __all__ = ["TABLES", "BUDGETS", "load_table", "row_options", "reproduce", "evaluate_findings",
@@ -109,10 +110,8 @@ def _write_config(opts: dict, path: Path) -> None:
     import yaml
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text("# bsp-reproduce: one row, usable as bsp-train --config\n"
-                   + yaml.safe_dump(opts, sort_keys=False), encoding="utf-8")
-    tmp.replace(path)
+    write_text(path, "# bsp-reproduce: one row, usable as bsp-train --config\n"
+               + yaml.safe_dump(opts, sort_keys=False))
 
 
 def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrides=None,
@@ -379,9 +378,7 @@ def main(argv=None) -> int:
                           ("results.json", json.dumps(
                               {**res, "findings": evaluate_findings(tab, res["results"])},
                               indent=1, default=str))):
-        tmp = base / f".{name}.tmp-{os.getpid()}"
-        tmp.write_text(content, encoding="utf-8")
-        tmp.replace(base / name)
+        write_text(base / name, content)
     print(f"wrote {base / 'results.md'}")
     return 0
 

@@ -16,6 +16,8 @@ import os
 import shutil
 from pathlib import Path
 
+from ..atomic import publish, temp_path
+
 __all__ = ["RunDirectory", "RunError", "default_run_dir", "resolve_checkpoint", "read_run",
            "ENV_TMP"]
 
@@ -44,7 +46,7 @@ class RunDirectory:
 
     ``copy_from`` (a resumed run) seeds ``tmp`` with that directory's files. Replacing an
     existing ``final`` needs ``force`` or ``final == copy_from``. ``tmp_name``: the
-    temporary directory's name (default ``.NAME.tmp-PID``; multi-machine DDP runs use one
+    temporary directory's name (default ``.NAME.tmp-PID-RANDOM``; multi-machine DDP runs use one
     every rank can compute).
     """
 
@@ -52,12 +54,13 @@ class RunDirectory:
         self.final = Path(final).absolute()
         self.copy_from = None if copy_from is None else Path(copy_from).absolute()
         in_place = self.copy_from is not None and self.copy_from == self.final
+        self.force = force or in_place
         if self.final.exists() and not (force or in_place):
             raise RunError(f"{self.final} exists; pass --force to replace it (or --resume it)",
                            code=3)
         if self.final.exists() and not self.final.is_dir():
             raise RunError(f"{self.final} exists and is not a directory")
-        self.tmp = self.final.with_name(tmp_name or f".{self.final.name}.tmp-{os.getpid()}")
+        self.tmp = self.final.with_name(tmp_name) if tmp_name else temp_path(self.final)
         self.committed = False
 
     def __enter__(self) -> Path:
@@ -80,13 +83,7 @@ class RunDirectory:
     def commit(self) -> None:
         if self.committed:
             return
-        old = None
-        if self.final.exists():
-            old = self.final.with_name(f".{self.final.name}.old-{os.getpid()}")
-            os.replace(self.final, old)
-        os.replace(self.tmp, self.final)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        publish(self.tmp, self.final, force=self.force)
         self.committed = True
 
 

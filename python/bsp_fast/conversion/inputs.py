@@ -7,14 +7,13 @@ import math
 import os
 from pathlib import Path
 
-__all__ = ["BadDataset"]
+from .errors import BadDataset
+
+__all__ = ["dataset_csv", "dataset_fov", "refuse_inputs_as_output"]
 
 
-class BadDataset(ValueError):
-    """The dataset cannot be converted as it is (e.g. a malformed config.yaml): exit 1."""
-
-
-def _dataset_csv(dataset) -> tuple[Path, Path]:
+def dataset_csv(dataset) -> tuple[Path, Path]:
+    """(dataset folder, its data.csv) from either; FileNotFoundError naming the path."""
     p = Path(dataset)
     if p.is_dir():
         csv = p / "data.csv"
@@ -26,7 +25,7 @@ def _dataset_csv(dataset) -> tuple[Path, Path]:
     raise FileNotFoundError(f"{p}: no such dataset directory or data.csv file")
 
 
-def _dataset_fov(root: Path):
+def dataset_fov(root: Path):
     """FOV from a bsp-synth config.yaml beside data.csv, if there is one; BadDataset when
     the file is not YAML, its top level not a mapping, or its FOV not a number in (0, 180)."""
     cfg = root / "config.yaml"
@@ -54,7 +53,7 @@ def _dataset_fov(root: Path):
     return None
 
 
-def _refuse_inputs_as_output(root: Path, csv: Path, out: Path) -> None:
+def refuse_inputs_as_output(root: Path, csv: Path, out: Path) -> None:
     """ValueError when `out` is (or resolves, through symlinks, to) one of the dataset's
     inputs: data.csv, config.yaml, or a media or CSV file inside the dataset directory."""
     real = Path(os.path.realpath(out))

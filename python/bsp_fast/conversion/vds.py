@@ -1,4 +1,7 @@
-"""Opening converted HDF5 files for reading, with their virtual datasets' sources checked.
+"""Virtual datasets of a sharded conversion, written and checked in one module.
+
+:func:`write_virtual` makes ``OUT.h5`` of a ``--scheduler dask`` conversion: for every
+dataset of the shards, one virtual dataset over their pieces in order.
 
 ``bsp-convert --scheduler dask`` writes ``OUT.h5`` as HDF5 virtual datasets over the shard
 files in ``OUT.h5.shards/`` (named relative to ``OUT.h5``'s folder). HDF5 reads a virtual
@@ -13,7 +16,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["MissingShardError", "open_clip_file", "check_virtual_sources"]
+__all__ = ["MissingShardError", "open_clip_file", "check_virtual_sources", "write_virtual",
+           "part_name"]
 
 
 class MissingShardError(FileNotFoundError, ValueError):
@@ -130,3 +134,49 @@ def open_clip_file(path):
         f.close()
         raise
     return f
+
+
+def part_name(k: int) -> str:
+    """The file of shard ``k`` inside the shards' folder."""
+    return f"part-{k:05d}.h5"
+
+
+def _copy_attrs(src, dst) -> None:
+    for name in src.attrs:
+        dst.attrs.create(name, src.attrs[name], dtype=src.attrs.get_id(name).dtype)
+
+
+def write_virtual(path: Path, folder: Path, rel_folder: str, count: int) -> None:
+    """``path``: the root and group attributes of shard 0 and one virtual dataset per
+    dataset, the shards' pieces concatenated along axis 0 (sources: ``rel_folder/part-k``,
+    relative to ``path``'s folder)."""
+    import h5py
+
+    parts = [h5py.File(folder / part_name(k), "r") for k in range(count)]
+    try:
+        first = parts[0]
+        names: list = []
+        first.visit(names.append)
+        with h5py.File(path, "w", libver="latest") as out:
+            _copy_attrs(first, out)
+            for name in names:
+                obj = first[name]
+                if isinstance(obj, h5py.Group):
+                    _copy_attrs(obj, out.require_group(name))
+                    continue
+                pieces = [p[name] for p in parts]
+                total = sum(d.shape[0] for d in pieces)
+                layout = h5py.VirtualLayout(shape=(total,) + obj.shape[1:], dtype=obj.dtype)
+                at = 0
+                for k, d in enumerate(pieces):
+                    n = d.shape[0]
+                    if n:
+                        layout[at:at + n] = h5py.VirtualSource(
+                            f"{rel_folder}/{part_name(k)}", name, shape=d.shape,
+                            dtype=d.dtype)
+                    at += n
+                ds = out.create_virtual_dataset(name, layout)
+                _copy_attrs(obj, ds)
+    finally:
+        for p in parts:
+            p.close()

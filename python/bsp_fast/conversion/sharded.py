@@ -17,13 +17,15 @@ from __future__ import annotations
 import builtins
 import math
 import os
-import shutil
 import time
 import uuid
 from pathlib import Path
 
-from ._native import core as _core
-from .convert_report import problems
+from .._native import core as _core
+from ..atomic import publish, remove, temp_path
+from .errors import UnusableConversion
+from .report import problems
+from .vds import part_name, write_virtual
 
 __all__ = ["convert_sharded", "shard_dir"]
 
@@ -33,33 +35,29 @@ def shard_dir(out: Path) -> Path:
     return out.with_name(out.name + ".shards")
 
 
-def _part_name(k: int) -> str:
-    return f"part-{k:05d}.h5"
-
-
 def _convert_shard(csv: str, folder: str, k: int, count: int, options: dict,
                    exclude: list) -> dict:
     """One Dask task: shard ``k`` of ``count`` into ``folder/part-k.h5`` (temporary name,
     renamed when complete; discarded when a media file failed)."""
-    from ._dask import heap_for_media, test_hook, worker_threads
+    from ..dask_cluster import heap_for_media, test_hook, worker_threads
 
     test_hook("shard", k)
     t0 = time.perf_counter()
     opts = dict(options)
     if not opts.get("threads"):
         opts["threads"] = worker_threads()
-    final = os.path.join(folder, _part_name(k))
-    tmp = os.path.join(folder, f".{_part_name(k)}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    final = Path(folder) / part_name(k)
+    tmp = temp_path(final)
     try:
         with heap_for_media():
-            report = _core.convert_csv(csv, tmp, None, shard_count=count, shard_index=k,
+            report = _core.convert_csv(csv, str(tmp), None, shard_count=count, shard_index=k,
                                        exclude=[tuple(e) for e in exclude], **opts)
         if report["shard_failures"]:
-            Path(tmp).unlink(missing_ok=True)
-        else:
-            os.replace(tmp, final)
+            remove(tmp)
+        else:  # a retried task may find its earlier attempt's part: the same bytes
+            publish(tmp, final, force=True)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        remove(tmp)
         raise
     report["shard"] = k
     report["seconds"]["task"] = time.perf_counter() - t0
@@ -83,12 +81,10 @@ def _run_shards(client, csv, folder, count, options, exclude):
 
 
 def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
-                    strict=False, root=None) -> dict:
+                    strict=False, root=None, force=False) -> dict:
     """Converts on ``client``'s workers; ``options`` as for ``_core.convert_csv``. Writes
     ``out`` and ``shard_dir(out)`` (temporary names, renamed when complete) and returns the
     report (like the one-process one, plus ``shards`` and ``scheduler``)."""
-    from .conversion import UnusableConversion
-
     if shards is None:
         shards = max(1, len(client.nthreads()))  # one per worker, with its threads
     # Workers get absolute paths (their working directory is not ours); media failures
@@ -101,9 +97,8 @@ def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
         return text.replace(here + os.sep, given + os.sep) if here != given else text
 
     t0 = time.perf_counter()
-    token = f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    tmp_dir = out.with_name(f".{out.name}.tmp-{token}.shards")
-    tmp_file = out.with_name(f".{out.name}.tmp-{token}")
+    tmp_file = temp_path(out)
+    tmp_dir = tmp_file.with_name(tmp_file.name + ".shards")
     final_dir = shard_dir(out)
     try:
         tmp_dir.mkdir(parents=True)
@@ -133,11 +128,14 @@ def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
         for p in tmp_dir.iterdir():  # left by attempts whose worker died mid-write
             if p.name.startswith("."):
                 p.unlink()
-        _write_virtual(tmp_file, tmp_dir, final_dir.name, shards)
-        _publish(tmp_file, tmp_dir, out, final_dir)
+        write_virtual(tmp_file, tmp_dir, final_dir.name, shards)
+        # The shards' folder first (it belongs to `out`; without the file nothing is
+        # published), then the file, each swapped in atomically.
+        publish(tmp_dir, final_dir, force=True)
+        publish(tmp_file, out, force=force)
     except BaseException:
-        tmp_file.unlink(missing_ok=True)
-        shutil.rmtree(tmp_dir, ignore_errors=True)
+        remove(tmp_file)
+        remove(tmp_dir)
         raise
     report["output"] = str(out)
     report["shard_dir"] = str(final_dir)
@@ -165,57 +163,3 @@ def _merge(reports: list, passes: int, shards: int, seconds: float) -> dict:
     report["shards"] = shards
     report["scheduler"] = "dask"
     return report
-
-
-def _copy_attrs(src, dst) -> None:
-    for name in src.attrs:
-        dst.attrs.create(name, src.attrs[name], dtype=src.attrs.get_id(name).dtype)
-
-
-def _write_virtual(path: Path, folder: Path, rel_folder: str, count: int) -> None:
-    """``path``: the root and group attributes of shard 0 and one virtual dataset per
-    dataset, the shards' pieces concatenated along axis 0 (sources: ``rel_folder/part-k``,
-    relative to ``path``'s folder)."""
-    import h5py
-
-    parts = [h5py.File(folder / _part_name(k), "r") for k in range(count)]
-    try:
-        first = parts[0]
-        names: list = []
-        first.visit(names.append)
-        with h5py.File(path, "w", libver="latest") as out:
-            _copy_attrs(first, out)
-            for name in names:
-                obj = first[name]
-                if isinstance(obj, h5py.Group):
-                    _copy_attrs(obj, out.require_group(name))
-                    continue
-                pieces = [p[name] for p in parts]
-                total = sum(d.shape[0] for d in pieces)
-                layout = h5py.VirtualLayout(shape=(total,) + obj.shape[1:], dtype=obj.dtype)
-                at = 0
-                for k, d in enumerate(pieces):
-                    n = d.shape[0]
-                    if n:
-                        layout[at:at + n] = h5py.VirtualSource(
-                            f"{rel_folder}/{_part_name(k)}", name, shape=d.shape,
-                            dtype=d.dtype)
-                    at += n
-                ds = out.create_virtual_dataset(name, layout)
-                _copy_attrs(obj, ds)
-    finally:
-        for p in parts:
-            p.close()
-
-
-def _publish(tmp_file: Path, tmp_dir: Path, out: Path, final_dir: Path) -> None:
-    """Renames the shards' folder, then the file, into place (an old folder is moved aside
-    first and removed last; without the file nothing is published)."""
-    old = None
-    if final_dir.exists():
-        old = final_dir.with_name(f".{final_dir.name}.old-{uuid.uuid4().hex[:8]}")
-        os.replace(final_dir, old)
-    os.replace(tmp_dir, final_dir)
-    os.replace(tmp_file, out)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)

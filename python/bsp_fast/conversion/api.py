@@ -1,0 +1,236 @@
+"""``bsp-convert``: a CARLA-BSP dataset (data.csv) -> train/val/test clips in one HDF5 file.
+
+Terminology, used the same way in the CLI, the API and the HDF5 attributes:
+
+* **clip length** ``L``: frames per clip.
+* **clip offset** (a.k.a. stride): frames between the first frames of two consecutive clips
+  of the same segment. ``offset = L`` gives back-to-back clips (no overlap); the overlap
+  is ``L - offset`` frames. The HDF5 file stores it as ``clip_stride``.
+* **eval clip offset**: the same for the val and test splits (default: the train offset),
+  so evaluation windows need not overlap like training windows.
+* **media**: per split, a frame table of S x S pedestrian crops (RGB from the MP4, class
+  tags from the segmentation APNG) with mask statistics and per-joint visibility; every
+  frame a clip uses is stored once and clips point into it (``clip_frames``). See
+  docs/hdf5-schema.md.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import threading
+import time
+import warnings
+from pathlib import Path
+
+from .._native import core as _core
+from ..atomic import atomic_output
+from ..defaults import CONVERT
+from . import report as _report
+from .errors import UnusableConversion
+from .inputs import dataset_csv, dataset_fov, refuse_inputs_as_output
+
+__all__ = ["convert", "conversion_settings"]
+
+
+
+
+def _label_fraction(label: str) -> float:
+    if label == "last":
+        return 0.0
+    if label.startswith("any:"):
+        try:
+            f = float(label[4:])
+        except ValueError:
+            f = -1.0
+        if 0.0 < f <= 1.0:
+            return f
+    raise ValueError(f"label must be 'last' or 'any:F' with 0 < F <= 1, got {label!r}")
+
+
+def _positive(name, v, allow_none=True):
+    if v is None and allow_none:
+        return
+    if not isinstance(v, int) or isinstance(v, bool) or v <= 0:
+        raise ValueError(f"{name} must be a positive integer, got {v!r}")
+
+
+def conversion_settings(dataset, *, clip_length=None, clip_offset=None, eval_clip_offset=None,
+                        fov=None, min_video_length=None, label=CONVERT["label"], benchmark=False,
+                        val_frac=CONVERT["val_frac"], test_frac=CONVERT["test_frac"],
+                        seed=CONVERT["seed"], balance=False, compress=False, media=True,
+                        crop_size=CONVERT["crop_size"], skip_bad_media=False) -> dict:
+    """The validated, fully resolved options that decide what :func:`convert` writes (the
+    ``settings`` of its report and the ``settings_json`` attribute of the file): defaults
+    filled in, the FOV looked up in the dataset's config.yaml. Raises ValueError."""
+    root, _ = dataset_csv(dataset)
+    if clip_length is None:
+        clip_length = CONVERT["benchmark_clip_length"] if benchmark else CONVERT["clip_length"]
+    if clip_offset is None:
+        clip_offset = CONVERT["benchmark_clip_offset"] if benchmark else clip_length
+    for name, v in (("clip_length", clip_length), ("clip_offset", clip_offset),
+                    ("eval_clip_offset", eval_clip_offset), ("min_video_length", min_video_length)):
+        _positive(name, v)
+    if not isinstance(crop_size, int) or isinstance(crop_size, bool) or not 8 <= crop_size <= 1024:
+        raise ValueError(f"crop_size must be an integer in [8, 1024], got {crop_size!r}")
+    for name, v in (("val_frac", val_frac), ("test_frac", test_frac)):
+        if not (isinstance(v, (int, float)) and 0 <= v < 1):
+            raise ValueError(f"{name} must lie in [0, 1), got {v!r}")
+    if val_frac + test_frac >= 1:
+        raise ValueError("val_frac + test_frac must be below 1")
+    _label_fraction(label)
+    fov_source = "argument"
+    if fov is None:
+        fov, fov_source = dataset_fov(root), "config.yaml"
+        if fov is None:
+            fov, fov_source = CONVERT["fov"], "default"
+    if not (0 < float(fov) < 180):
+        raise ValueError(f"fov must lie in (0, 180) degrees, got {fov!r}")
+    return dict(clip_length=clip_length, clip_offset=clip_offset,
+                eval_clip_offset=eval_clip_offset or clip_offset,
+                min_video_length=min_video_length or clip_length, label=label,
+                benchmark=bool(benchmark), val_frac=val_frac, test_frac=test_frac,
+                seed=int(seed), balance=bool(balance), fov=float(fov), fov_source=fov_source,
+                compress=bool(compress), media=bool(media),
+                crop_size=int(crop_size) if media else None,
+                skip_bad_media=bool(skip_bad_media) if media else None)
+
+
+def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_offset=None,
+            fov=None, min_video_length=None, label=CONVERT["label"], benchmark=False,
+            val_frac=CONVERT["val_frac"], test_frac=CONVERT["test_frac"], seed=CONVERT["seed"],
+            balance=False, threads=None, verify=False, compress=False, media=True,
+            crop_size=CONVERT["crop_size"], skip_bad_media=False, force=False,
+            progress=None, strict=False, client=None, shards=None) -> dict:
+    """Converts a CARLA-BSP dataset into train/val/test clips in one HDF5 file.
+
+    ``dataset`` is the dataset directory (or its data.csv). ``clip_length`` defaults to 30
+    (16 with ``benchmark``), ``clip_offset`` to the clip length (6 with ``benchmark``),
+    ``eval_clip_offset`` to ``clip_offset``. ``label`` is ``'last'`` (is_crossing of the
+    last frame) or ``'any:F'`` (any of the last ceil(L*F) frames). ``benchmark`` selects the
+    time-to-event windows with video-level labels (it does not balance: add ``balance``).
+    The split is by recording: ``test_frac`` of all clips go to test, then ``val_frac`` of
+    the clips that remain go to validation (each at least one clip, whole recordings), so
+    the defaults give about 20 % test and 16 % validation clips. ``fov`` defaults to the
+    dataset's config.yaml, else 90 degrees. The output is written under a temporary name
+    and renamed when complete; an existing ``out_path`` is kept unless ``force``.
+
+    ``media`` (default on) decodes each recording's MP4 and segmentation APNG once and
+    stores ``crop_size`` x ``crop_size`` pedestrian crops (RGB and class tags), mask
+    statistics and joint visibility of every frame the clips use. A missing or broken media
+    file fails the conversion naming the file, unless ``skip_bad_media``: then its
+    recording is left out (the split is planned without it) and listed in
+    ``report["media"]["bad"]``. Media paths in data.csv that are absolute or leave the
+    dataset root (``..``) are refused before anything is opened. ``compress`` deflates the
+    large pose targets and the RGB crops (about 2.5x smaller, much slower random reads).
+
+    ``progress`` (default: when stderr is a terminal) shows a bar per stage. An empty split
+    or a split with a single class is listed in ``report["warnings"]`` and warned about
+    (``UserWarning``); ``strict`` raises :class:`UnusableConversion` instead and writes
+    nothing.
+
+    Returns the report: rows, recordings, clips per split and class, skipped recordings
+    and why, seconds per stage, ``media`` (frames per split, seconds, crops_per_second,
+    bad files and why), ``warnings``, ``settings`` and, with ``verify``, the verification
+    table.
+
+    ``client`` (a ``distributed.Client``) converts on a Dask cluster instead: ``shards``
+    tasks (default: one per worker), each writing part of the output into the folder
+    ``<out_path>.shards``, and ``out_path`` made of HDF5 virtual datasets over them, equal
+    value for value to the one-process output (docs/distributed.md).
+    """
+    root, csv = dataset_csv(dataset)
+    out = Path(out_path)
+    refuse_inputs_as_output(root, csv, out)
+    if out.exists() and not force:
+        raise FileExistsError(f"{out} exists; pass force=True (--force) to overwrite it")
+    settings = conversion_settings(
+        dataset, clip_length=clip_length, clip_offset=clip_offset,
+        eval_clip_offset=eval_clip_offset, fov=fov, min_video_length=min_video_length,
+        label=label, benchmark=benchmark, val_frac=val_frac, test_frac=test_frac, seed=seed,
+        balance=balance, compress=compress, media=media, crop_size=crop_size,
+        skip_bad_media=skip_bad_media)
+    _positive("threads", threads)
+    _positive("shards", shards)
+    if shards is not None and client is None:
+        raise ValueError("shards needs a client (a Dask cluster to run them on)")
+    if progress is None:
+        progress = _is_terminal(sys.stderr)
+    st = settings
+    options = dict(clip_length=st["clip_length"], clip_stride=st["clip_offset"],
+                   eval_clip_stride=eval_clip_offset or 0, min_video_length=min_video_length or 0,
+                   label_fraction=_label_fraction(label), benchmark=st["benchmark"],
+                   val_frac=float(val_frac), test_frac=float(test_frac), seed=st["seed"],
+                   balance=st["balance"], fov=st["fov"], threads=int(threads or 0),
+                   verify=bool(verify), compress=st["compress"], media=st["media"],
+                   crop_size=int(crop_size), skip_bad_media=bool(skip_bad_media),
+                   source_path=str(root.resolve()),
+                   extra_attrs={"settings_json": json.dumps(settings, sort_keys=True)})
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if client is not None:
+        from .sharded import convert_sharded
+
+        report = convert_sharded(str(csv), out, options, client, shards=shards, strict=strict,
+                                 root=root, force=force)
+        report["settings"] = settings
+        for w in report["warnings"]:
+            warnings.warn(f"bsp_fast.convert: {w} ({out})", UserWarning, stacklevel=2)
+        return report
+    with atomic_output(out, force=force) as tmp:
+        report = _run(str(csv), str(tmp), options, progress)
+        report["warnings"] = _report.problems(report)
+        if strict and report["warnings"]:
+            raise UnusableConversion(f"{root}: unusable conversion (strict): "
+                                     + "; ".join(report["warnings"]) + "; nothing written")
+    report["output"] = str(out)
+    report["settings"] = settings
+    for w in report["warnings"]:
+        warnings.warn(f"bsp_fast.convert: {w} ({out})", UserWarning, stacklevel=2)
+    return report
+
+
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+def _run(csv: str, tmp: str, options: dict, show_progress: bool) -> dict:
+    """Runs the C++ conversion in a thread (GIL released) and polls its progress."""
+    prog = _core.ConvertProgress()
+    result: dict = {}
+
+    def work():
+        try:
+            result["report"] = _core.convert_csv(csv, tmp, prog, **options)
+        except BaseException as exc:  # re-raised in the calling thread
+            result["error"] = exc
+
+    t = threading.Thread(target=work, name="bsp-convert", daemon=True)
+    t0 = time.perf_counter()
+    t.start()
+    bars = _report.ProgressBars(show_progress)
+    try:
+        while t.is_alive():
+            t.join(0.1)
+            if show_progress:
+                stage, total, done = prog.stage, prog.total, prog.done
+                if prog.stage == stage:  # a consistent snapshot (no stage change in between)
+                    bars.poll(stage, total, done)
+    except BaseException:  # Ctrl-C, SIGTERM: the C++ work stops and is joined before we leave
+        prog.cancel()
+        t.join()
+        raise
+    finally:
+        bars.close(completed="report" in result)
+    if "error" in result:
+        raise result["error"]
+    report = result["report"]
+    report["seconds"]["total"] = time.perf_counter() - t0
+    media = report["media"]
+    media["enabled"] = bool(options.get("media", True))
+    frames = sum(media["frames"].values())
+    decode = report["seconds"].get("media", 0.0)
+    media["crops_per_second"] = frames / decode if decode > 0 else math.nan
+    return report
