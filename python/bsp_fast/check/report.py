@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 
 import numpy as np
+
+from ..atomic import write_text
 
 
 def _plain(x):
@@ -24,17 +25,7 @@ def to_json(report: dict, path=None) -> str:
     """The report as JSON text; with ``path``, also written there (atomically)."""
     text = json.dumps(_plain(report), indent=1) + "\n"
     if path is not None:
-        path = os.fspath(path)
-        fd, tmp = tempfile.mkstemp(prefix=os.path.basename(path) + ".tmp-",
-                                   dir=os.path.dirname(os.path.abspath(path)))
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                fh.write(text)
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        write_text(path, text)
     return text
 
 

@@ -29,7 +29,7 @@ LIFTING_TARGETS = ("absolute", "world", "camera")
 AUGMENTED_TASKS = ("classification", "autoencoder")  # 2D flips/rotations; images: pose
 _META_STR = ("video_id", "pedestrian_id", "age", "gender")
 _META_INT = ("clip_id", "start_frame", "end_frame")
-_MEDIA = ("frames/rgb", "frames/crop_box", "frames/joint_visible", "clip_frames")
+MEDIA_DATASETS = ("frames/rgb", "frames/crop_box", "frames/joint_visible", "clip_frames")
 
 
 def _rotation_matrices(pyr: np.ndarray) -> np.ndarray:
@@ -114,7 +114,7 @@ class ClipDataset(SplitDataset):
             missing = [n for n in self._required() if n not in g]
             if missing:
                 hint = (" (convert with media=True, i.e. without --no-media)"
-                        if any(n in _MEDIA for n in missing) else "")
+                        if any(n in MEDIA_DATASETS for n in missing) else "")
                 raise ValueError(f"{self.h5_path}: /{self.split} lacks {missing} needed by task "
                                  f"{self.task!r}{hint}")
             self.attrs = {k: plain(v) for k, v in f.attrs.items()}
@@ -141,7 +141,7 @@ class ClipDataset(SplitDataset):
             if self.lifting_target == "camera":
                 names.append("meta/camera_transform")
         if self.task == "pose_estimation":
-            names += list(_MEDIA) + (["frames/mask"] if self.with_mask else [])
+            names += list(MEDIA_DATASETS) + (["frames/mask"] if self.with_mask else [])
         return names
 
     def _balanced(self, rows: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ import numpy as np
 
 from . import images as I
 from .base import Rows, SplitDataset, plain
-from .datasets import _MEDIA, pose_crops
+from .datasets import MEDIA_DATASETS, pose_crops
 
 __all__ = ["FrameDataset"]
 
@@ -53,7 +53,7 @@ class FrameDataset(SplitDataset):
                 raise ValueError(f"{self.h5_path}: not a schema-1 bsp-convert file with "
                                  f"/{self.split}")
             g = f[self.split]
-            need = list(_MEDIA) + ["projection_2d", "frames/frame_idx"]
+            need = list(MEDIA_DATASETS) + ["projection_2d", "frames/frame_idx"]
             need += [f"meta/{k}" for k in _META_STR] + (["frames/mask"] if self.with_mask else [])
             missing = [n for n in need if n not in g]
             if missing:

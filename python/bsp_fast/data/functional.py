@@ -28,11 +28,11 @@ HIPS, NECK = _sk.HIPS, _sk.NECK
 #: (0, FALLBACK_SHIFT * s_b), scale = FALLBACK_SCALE * s_b, s_b = half the bbox height.
 FALLBACK_SHIFT = -0.1059
 FALLBACK_SCALE = 0.5748
-_FLIP = np.asarray(_sk.FLIP_PERMUTATION, dtype=np.intp)
+FLIP = np.asarray(_sk.FLIP_PERMUTATION, dtype=np.intp)
 _HUGE = 1e37  # penalty that keeps missing joints out of bbox minima/maxima
 
 
-def _to_numpy(x, dtype=np.float32):
+def to_numpy(x, dtype=np.float32):
     """(array, back): ``back`` turns a NumPy result into the caller's type (torch or NumPy)."""
     if type(x).__module__.startswith("torch"):
         import torch
@@ -44,13 +44,13 @@ def _to_numpy(x, dtype=np.float32):
     return np.asarray(x, dtype=dtype), (lambda a: a)
 
 
-def _check_points(p: np.ndarray, dims=(2,), name="points") -> None:
+def check_points(p: np.ndarray, dims=(2,), name="points") -> None:
     if p.ndim < 2 or p.shape[-1] not in dims:
         want = " or ".join(f"(..., J, {d})" for d in dims)
         raise ValueError(f"{name}: expected shape {want}, got {p.shape}")
 
 
-def _clip_shape(p: np.ndarray) -> tuple:
+def clip_shape(p: np.ndarray) -> tuple:
     """Shape of the clip axes (one random decision each): all axes before (L, J, D)."""
     return p.shape[:-3] if p.ndim > 3 else ()
 
@@ -62,7 +62,7 @@ def _per_clip(values: np.ndarray, ndim: int) -> np.ndarray:
     return values.reshape(values.shape + (1,) * (ndim - values.ndim))
 
 
-def _keep(out: np.ndarray, keep: np.ndarray) -> np.ndarray:
+def keep_visible(out: np.ndarray, keep: np.ndarray) -> np.ndarray:
     """Zeroes (in place) the joints where ``keep`` is False. Works plane by plane: NumPy
     broadcasting against the trailing axis of length 2 is ~10x slower."""
     for k in range(out.shape[-1]):
@@ -85,8 +85,8 @@ def _affine(p: np.ndarray, shift: np.ndarray, factor: np.ndarray, inverse: bool)
 
 def visible_joints(points) -> np.ndarray:
     """``(..., J)`` bool: True where a joint is not missing (not exactly ``(0, 0)``)."""
-    p, _ = _to_numpy(points)
-    _check_points(p)
+    p, _ = to_numpy(points)
+    check_points(p)
     return (p[..., 0] != 0) | (p[..., 1] != 0)
 
 
@@ -95,8 +95,8 @@ def joint_bbox(points, visible=None, per: str = "frame"):
     (``per="frame"``, boxes ``points.shape[:-2]``) or per clip (``per="clip"``, reduced over
     the frame axis too). Boxes without any visible joint are ``(0, 0)``-``(0, 0)``.
     """
-    p, _ = _to_numpy(points)
-    _check_points(p)
+    p, _ = to_numpy(points)
+    check_points(p)
     if per not in ("frame", "clip"):
         raise ValueError(f"per must be 'frame' or 'clip', got {per!r}")
     vis = visible_joints(p) if visible is None else np.asarray(visible, bool)
@@ -140,8 +140,8 @@ def normalize_hips_neck(points, visible=None) -> NormalizedPose:
     stay exactly (0, 0) in the output; :func:`denormalize_hips_neck` with ``visible``
     restores them.
     """
-    p, back = _to_numpy(points)
-    _check_points(p)
+    p, back = to_numpy(points)
+    check_points(p)
     vis = visible_joints(p) if visible is None else np.asarray(visible, bool)
     hips, neck = p[..., HIPS, :], p[..., NECK, :]
     dist = np.linalg.norm(neck - hips, axis=-1)
@@ -167,13 +167,13 @@ def denormalize_hips_neck(points, shift, scale, visible=None):
 
     Joints where ``visible`` is False are returned as exactly (0, 0) (missing).
     """
-    p, back = _to_numpy(points)
-    _check_points(p)
-    s, _ = _to_numpy(shift)
-    k, _ = _to_numpy(scale)
+    p, back = to_numpy(points)
+    check_points(p)
+    s, _ = to_numpy(shift)
+    k, _ = to_numpy(scale)
     out = _affine(p, s, k, inverse=True)
     if visible is not None:
-        _keep(out, _to_numpy(visible, bool)[0])
+        keep_visible(out, to_numpy(visible, bool)[0])
     return back(out)
 
 
@@ -183,8 +183,8 @@ def normalize_hips_neck_3d(points):
     ``points`` is ``(..., J, 3)`` (metres); 3D targets have no missing joints. A frame with
     coincident hips and neck gets scale 1.
     """
-    p, back = _to_numpy(points)
-    _check_points(p, (3,))
+    p, back = to_numpy(points)
+    check_points(p, (3,))
     shift = p[..., HIPS, :]
     scale = np.linalg.norm(p[..., NECK, :] - shift, axis=-1)
     scale[~(scale > 0)] = 1.0
@@ -201,10 +201,10 @@ def denormalize_hips_neck_3d(points, shift, scale):
     the ground truth's own scale, pass the reference skeleton's length
     (``bsp_fast.skeleton.hips_neck_length``) instead.
     """
-    p, back = _to_numpy(points)
-    _check_points(p, (3,))
-    shift = np.asarray(_to_numpy(shift)[0], np.float32)
-    scale = np.asarray(_to_numpy(scale)[0], np.float32)
+    p, back = to_numpy(points)
+    check_points(p, (3,))
+    shift = np.asarray(to_numpy(shift)[0], np.float32)
+    scale = np.asarray(to_numpy(scale)[0], np.float32)
     if shift.shape != p.shape[:-2] + (3,) or scale.shape != p.shape[:-2]:
         raise ValueError(f"shift must have shape {p.shape[:-2] + (3,)} and scale "
                          f"{p.shape[:-2]} for points {p.shape}, got {shift.shape} and "
@@ -218,12 +218,12 @@ def flip_horizontal(points, width):
     ``width`` is a number or per-clip array (shape of the clip axes). Missing joints stay
     (0, 0). Flipping twice returns the input.
     """
-    p, back = _to_numpy(points)
-    _check_points(p)
-    if p.shape[-2] != len(_FLIP):
-        raise ValueError(f"points: flipping needs {len(_FLIP)} joints, got {p.shape[-2]}")
+    p, back = to_numpy(points)
+    check_points(p)
+    if p.shape[-2] != len(FLIP):
+        raise ValueError(f"points: flipping needs {len(FLIP)} joints, got {p.shape[-2]}")
     w = _per_clip(np.asarray(width, np.float32), p.ndim - 1)
-    out = np.take(p, _FLIP, axis=-2)  # a new array; ~8x faster than p[..., _FLIP, :]
+    out = np.take(p, FLIP, axis=-2)  # a new array; ~8x faster than p[..., FLIP, :]
     vis = (out[..., 0] != 0) | (out[..., 1] != 0)
     out[..., 0] = np.where(vis, w - out[..., 0], 0)
     return back(out)
@@ -236,8 +236,8 @@ def rotate(points, degrees, centre=None):
     Positive angles turn from +u towards +v (clockwise on screen, v points down). Missing
     joints stay (0, 0).
     """
-    p, back = _to_numpy(points)
-    _check_points(p)
+    p, back = to_numpy(points)
+    check_points(p)
     vis = visible_joints(p)
     if centre is None:
         lo, hi = joint_bbox(p, vis, "clip" if p.ndim >= 3 else "frame")
@@ -251,7 +251,7 @@ def rotate(points, degrees, centre=None):
     out = np.empty_like(p)
     out[..., 0] = c[..., 0] + cos * du - sin * dv
     out[..., 1] = c[..., 1] + sin * du + cos * dv
-    _keep(out, vis)  # missing joints back to (0, 0)
+    keep_visible(out, vis)  # missing joints back to (0, 0)
     return back(out)
 
 
@@ -263,9 +263,9 @@ def flip_rotate(points, flip, degrees, width):
     ``points.shape[:-3]``); the rotation centre is the joint bbox centre of the (flipped)
     clip, which is the mirror of the unflipped clip's centre.
     """
-    p, back = _to_numpy(points)
-    _check_points(p)
-    clips = _clip_shape(p)
+    p, back = to_numpy(points)
+    check_points(p)
+    clips = clip_shape(p)
     flip = np.broadcast_to(np.asarray(flip, bool), clips)
     w = np.broadcast_to(np.asarray(width, np.float32), clips)
     vis = visible_joints(p)
@@ -275,11 +275,11 @@ def flip_rotate(points, flip, degrees, width):
     if flip.any():  # np.take: ~8x faster than fancy indexing of the joint axis
         if flip.ndim:
             p = p.copy()
-            p[flip] = np.take(p[flip], _FLIP, axis=-2)
+            p[flip] = np.take(p[flip], FLIP, axis=-2)
             vis = vis.copy()
-            vis[flip] = np.take(vis[flip], _FLIP, axis=-1)
+            vis[flip] = np.take(vis[flip], FLIP, axis=-1)
         else:
-            p, vis = np.take(p, _FLIP, axis=-2), np.take(vis, _FLIP, axis=-1)
+            p, vis = np.take(p, FLIP, axis=-2), np.take(vis, FLIP, axis=-1)
     a = np.deg2rad(np.asarray(degrees, np.float64))
     sign = np.where(flip, -1.0, 1.0)  # mirror u -> w - u folded into the linear part
     cos, sin = np.cos(a), np.sin(a)
@@ -295,5 +295,5 @@ def flip_rotate(points, flip, degrees, width):
     out[..., 0] = m[0] * u + m[1] * v + t[0]
     out[..., 1] = m[2] * u + m[3] * v + t[1]
     if not vis.all():
-        _keep(out, vis)
+        keep_visible(out, vis)
     return back(out)

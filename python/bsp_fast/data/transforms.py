@@ -29,11 +29,11 @@ from .functional import (  # noqa: F401  (re-exported: the functional forms live
     HIPS,
     NECK,
     NormalizedPose,
-    _FLIP,
-    _check_points,
-    _clip_shape,
-    _keep,
-    _to_numpy,
+    FLIP,
+    check_points,
+    clip_shape,
+    keep_visible,
+    to_numpy,
     denormalize_hips_neck,
     flip_horizontal,
     flip_rotate,
@@ -105,14 +105,14 @@ class GaussianNoise:
         self.sigma = float(sigma)
 
     def __call__(self, points, rng=None, **context):
-        p, back = _to_numpy(points)
-        _check_points(p)
+        p, back = to_numpy(points)
+        check_points(p)
         if self.sigma == 0:
             return back(p.copy())
         vis = visible_joints(p)
         noise = _normal(_rng(rng), p.shape)
         noise *= np.float32(self.sigma)
-        out = _keep(np.add(p, noise, out=noise), vis)
+        out = keep_visible(np.add(p, noise, out=noise), vis)
         return back(out)
 
     def __repr__(self) -> str:
@@ -135,18 +135,18 @@ class MissingJoints:
     ``p`` is one probability for all joints or one per joint (26 numbers).
     """
 
-    def __init__(self, p=0.0, n_joints: int = len(_FLIP)):
+    def __init__(self, p=0.0, n_joints: int = len(FLIP)):
         self.p = _probabilities(p, n_joints)
 
     def __call__(self, points, rng=None, **context):
-        p, back = _to_numpy(points)
-        _check_points(p)
+        p, back = to_numpy(points)
+        check_points(p)
         if p.shape[-2] != len(self.p):
             raise ValueError(f"points: expected {len(self.p)} joints, got {p.shape[-2]}")
         out = p.copy()
         if np.any(self.p > 0):
             drop = _rng(rng).random(p.shape[:-1], dtype=np.float32) < self.p.astype(np.float32)
-            _keep(out, ~drop)
+            keep_visible(out, ~drop)
         return back(out)
 
     def __repr__(self) -> str:
@@ -184,7 +184,7 @@ class Deform(Compose):
         super().__init__([GaussianNoise(sigma), MissingJoints(p)])
 
     def __call__(self, points, rng=None, **context):
-        p, back = _to_numpy(points)
+        p, back = to_numpy(points)
         out, _ = self.apply(p, rng)
         return back(out)
 
@@ -192,7 +192,7 @@ class Deform(Compose):
         """NumPy ``(deformed, visible)``; ``visible`` of the input may be given to save a
         pass (the datasets know their stored clips have no missing joint)."""
         noise, missing = self.transforms
-        _check_points(p)
+        check_points(p)
         if p.shape[-2] != len(missing.p):
             raise ValueError(f"points: expected {len(missing.p)} joints, got {p.shape[-2]}")
         rng = _rng(rng)
@@ -205,7 +205,7 @@ class Deform(Compose):
             out = p.copy()
         if np.any(missing.p > 0):
             keep &= rng.random(p.shape[:-1], dtype=np.float32) >= missing.p.astype(np.float32)
-        return _keep(out, keep), keep
+        return keep_visible(out, keep), keep
 
 
 class HorizontalFlip:
@@ -218,13 +218,13 @@ class HorizontalFlip:
         self.p, self.width = float(p), width
 
     def __call__(self, points, rng=None, width=None, **context):
-        p, back = _to_numpy(points)
-        _check_points(p)
+        p, back = to_numpy(points)
+        check_points(p)
         w = self.width if width is None else width
         if w is None:
             raise ValueError("HorizontalFlip: the image width is needed (width=...)")
-        w = np.broadcast_to(np.asarray(w, np.float32), _clip_shape(p))
-        flip = _rng(rng).random(_clip_shape(p)) < self.p
+        w = np.broadcast_to(np.asarray(w, np.float32), clip_shape(p))
+        flip = _rng(rng).random(clip_shape(p)) < self.p
         if flip.ndim == 0:
             return back(flip_horizontal(p, w) if flip else p.copy())
         out = p.copy()
@@ -245,14 +245,14 @@ class RandomFlipRotate:
         self.rotation = RandomRotation(degrees)
 
     def __call__(self, points, rng=None, width=None, **context):
-        p, back = _to_numpy(points)
-        _check_points(p)
+        p, back = to_numpy(points)
+        check_points(p)
         w = self.flip.width if width is None else width
         if w is None:
             raise ValueError("RandomFlipRotate: the image width is needed (width=...)")
         rng = _rng(rng)
-        flip = rng.random(_clip_shape(p)) < self.flip.p
-        degrees = rng.uniform(-self.rotation.degrees, self.rotation.degrees, _clip_shape(p))
+        flip = rng.random(clip_shape(p)) < self.flip.p
+        degrees = rng.uniform(-self.rotation.degrees, self.rotation.degrees, clip_shape(p))
         return back(flip_rotate(p, flip, degrees, w))
 
     def __repr__(self) -> str:
@@ -269,9 +269,9 @@ class RandomRotation:
         self.degrees = float(degrees)
 
     def __call__(self, points, rng=None, **context):
-        p, back = _to_numpy(points)
-        _check_points(p)
-        angles = _rng(rng).uniform(-self.degrees, self.degrees, _clip_shape(p))
+        p, back = to_numpy(points)
+        check_points(p)
+        angles = _rng(rng).uniform(-self.degrees, self.degrees, clip_shape(p))
         return back(rotate(p, angles))
 
     def __repr__(self) -> str:

@@ -1,0 +1,23 @@
+"""The house rules a parse can check (tools/house_check.py): no import cycle, no private
+names imported across modules, no file over 450 lines, one temp-then-rename helper per
+language, the default seed written only in the defaults."""
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+spec = importlib.util.spec_from_file_location("house_check", ROOT / "tools" / "house_check.py")
+house = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(house)
+
+
+def test_cycle_finder_finds_a_lazy_cycle_and_ignores_parent_packages():
+    edges = {"p.a": {"p.b"}, "p.b": {"p.a"}, "p": {"p.a"}, "p.c": {"p"}, "p.d": {"p.c"}}
+    assert house.cycles(edges) == [["p.a", "p.b"]]
+
+
+def test_the_tree_keeps_the_house_rules():
+    p = subprocess.run([sys.executable, str(ROOT / "tools" / "house_check.py")],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stdout + p.stderr
