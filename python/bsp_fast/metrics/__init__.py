@@ -20,6 +20,7 @@ from .classification import (
 )
 from .pose2d import PCKCounts, masked_mse, missing_joint_ratio, pck, pck_counts
 from .pose3d import denormalise_lifting, mpjpe, mpjve, n_mpjpe, pa_mpjpe, root_align
+from .threshold_free import auroc, average_precision, pck_auc, pck_curve
 
 _STREAMING = ("ClassificationMetrics", "PCK", "MPJPE", "NMPJPE", "PAMPJPE", "MPJVE",
               "MaskedMSE", "MissingJointRatio")
@@ -28,7 +29,7 @@ __all__ = [
     "f1_score", "precision", "recall", "accuracy", "confusion_matrix", "confusion_counts",
     "predicted_labels", "pck", "pck_counts", "PCKCounts", "missing_joint_ratio",
     "masked_mse", "mpjpe", "n_mpjpe", "pa_mpjpe", "mpjve", "root_align",
-    "denormalise_lifting", *_STREAMING,
+    "denormalise_lifting", "auroc", "average_precision", "pck_curve", "pck_auc", *_STREAMING,
 ]
 
 
