@@ -30,7 +30,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "and segmentation, a contact sheet of converted clips, a clip's 3D "
                     "skeleton, or predictions against the ground truth. Bones are coloured "
                     "by side: left blue, right orange, centre green.",
-        epilog="Exit codes: 0 written, 1 unreadable input (media, HDF5), 2 bad arguments "
+        epilog="Exit codes: 0 written, 1 unreadable input (media, HDF5) or the 'preview' "
+               "extra (OpenCV, matplotlib) not installed, 2 bad arguments "
                "(unknown recording or clip, OUT exists without --force, wrong extension). "
                "Details: docs/preview.md.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -144,6 +145,9 @@ def main(argv=None) -> int:
 
     try:
         res = _run(args)
+    except ImportError as e:  # an optional dependency: the message names the extra
+        print(f"bsp-preview: {e}", file=sys.stderr)
+        return EXIT_ERROR
     except (ValueError, FileNotFoundError, FileExistsError) as e:
         print(f"bsp-preview: {e}", file=sys.stderr)
         return EXIT_USAGE

@@ -6,11 +6,13 @@ column j covers u in [j, j + 1)) is drawn centred on pixel (floor(u), floor(v)).
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
+from .._extras import require
 from .. import skeleton as sk
 from ..media import CITYSCAPES_PALETTE
+
+cv2 = require("cv2", "bsp-preview")
 
 #: Bone and joint colours (RGB) by side of the body.
 LEFT = (0, 170, 255)

@@ -44,6 +44,9 @@ class SkeletonFigure:
 
     def __init__(self, panels, lo, hi, size=(800, 400), n_skeletons: int = 1,
                  colours=None, suptitle: str = ""):
+        from .._extras import require
+
+        require("matplotlib", "bsp-preview (3D views)")
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 
