@@ -22,6 +22,8 @@ BBOX = (255, 255, 255)
 #: Ground truth and prediction colours of `bsp-preview predictions`.
 TRUTH = (60, 230, 60)
 PREDICTION = (255, 0, 255)
+#: The autoencoder's noisy input in `bsp-preview predictions`.
+INPUT = (150, 150, 150)
 CAPTION_BG = (24, 24, 24)
 CAPTION_FG = (235, 235, 235)
 FONT = cv2.FONT_HERSHEY_SIMPLEX
