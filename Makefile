@@ -106,14 +106,16 @@ fuzz: fuzz-build
 	    echo "fuzz_$$h failed (exit $$rc): input in build/fuzz/crashes/"; exit 1; fi; \
 	done
 
+# Each step is echoed as a user types it (the console script and its options), and run
+# through the Python `make install` installed into, whose scripts may not be on PATH.
+bsp = @echo '$$ bsp-$(1) $(2)' && $(PY) -m bsp_fast $(1) $(2)
+
 demo: install
-	$(PY) -m bsp_fast synth demo-out/dataset --preset sample --force
-	$(PY) -m bsp_fast convert demo-out/dataset demo-out/clips.h5 --verify --strict --force
-	$(PY) tools/h5_summary.py demo-out/clips.h5
-	$(PY) -m bsp_fast train lifting lstm --data demo-out/dataset --clip-length 16 \
-	    --clip-offset 4 --epochs 8 --batch-size 8 --lr 1e-3 --seed 1 --threads 1 \
-	    --out demo-out/runs/lifting-lstm --force --quiet
-	$(PY) -m bsp_fast eval --table demo-out/runs/lifting-lstm
+	$(call bsp,synth,demo-out/dataset --preset sample --force)
+	$(call bsp,convert,demo-out/dataset demo-out/clips.h5 --verify --strict --force)
+	@echo '$$ python tools/h5_summary.py demo-out/clips.h5' && $(PY) tools/h5_summary.py demo-out/clips.h5
+	$(call bsp,train,lifting lstm --data demo-out/dataset --clip-length 16 --clip-offset 4 --epochs 8 --batch-size 8 --lr 1e-3 --seed 1 --threads 1 --out demo-out/runs/lifting-lstm --force --quiet)
+	$(call bsp,eval,--table demo-out/runs/lifting-lstm)
 
 # The speed comparisons behind the README's tables (several minutes; not part of the tests).
 bench: install

@@ -52,11 +52,12 @@ def main(argv=None) -> int:
         print("|---|---|---:|---:|---:|")
         for spec in args.models:
             task, model = spec.split("/")
+            # runs are named by task and model: lstm exists for two tasks
             for precision in args.precisions:
                 t0 = time.perf_counter()
                 try:
                     res = bsp_fast.train(task, model, data=h5,
-                                         out=Path(tmp) / f"{model}-{precision}",
+                                         out=Path(tmp) / f"{task}-{model}-{precision}",
                                          epochs=args.epochs, batch_size=args.batch_size,
                                          precision=precision, accelerator="cpu", quiet=True)
                 except ValueError as exc:  # e.g. no bf16 LSTM kernel on this CPU

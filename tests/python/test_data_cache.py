@@ -85,7 +85,8 @@ def test_explicit_h5_path_is_checked_not_replaced(ds, tmp_path, capsys):
     out = tmp_path / "mine.h5"
     _prepare(BSPDataModule(ds, out, clip_length=12), capsys)
     mtime = out.stat().st_mtime_ns
-    with pytest.raises(ValueError, match=r"label='last' \(now 'any:0.5'\)"):
+    with pytest.raises(ValueError, match=r"converted with other options: --label any:0.5 vs "
+                                         r"last in the file; delete it"):
         BSPDataModule(ds, out, clip_length=12, convert_options={"label": "any:0.5"}).prepare_data()
     assert out.stat().st_mtime_ns == mtime
 

@@ -37,7 +37,8 @@ def test_option_checks(h5file, tmp_path):
     with pytest.raises(ValueError, match="needs dataset_dir"):
         BSPDataModule()
     dm = BSPDataModule(h5_path=h5file, clip_length=16)
-    with pytest.raises(ValueError, match="clip_length=6 but the data module asks for 16"):
+    with pytest.raises(ValueError, match="converted with other options: --clip-length 16 vs 6 "
+                                         "in the file"):
         dm.setup()
     with pytest.raises(FileNotFoundError, match="no dataset_dir"):
         BSPDataModule(h5_path=tmp_path / "missing.h5").prepare_data()

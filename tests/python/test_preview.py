@@ -198,3 +198,101 @@ def test_cli_exit_codes(sample, tmp_path, capsys):
                  str(tmp_path / "y.png")]) == 2
     assert main(["--help"]) == 0
     assert main(["frames"]) == 2
+
+
+# ---------------------------------------------------------------- issue 28, item 11
+def test_pose_estimation_predictions_are_drawn_on_their_crops(sample, tmp_path):
+    """A bsp-predict-like file (rows of the test split, image pixels, source) is drawn on
+    the crops of the converted file, skeletons where the crop box puts them."""
+    with h5py.File(sample / "clips.h5", "r") as f:
+        g = f["test"]
+        n = min(3, g["labels"].shape[0])
+        uv = g["projection_2d"][:n].astype(np.float64)
+        cf = g["clip_frames"][:n]
+        boxes = g["frames/crop_box"][()][cf]
+        rgb = g["frames/rgb"][()][cf]
+    preds = tmp_path / "pose.h5"
+    S = 64.0  # the model's crop side
+    crop_uv = (uv - boxes[..., None, :2]) * (S / (boxes[..., 2] - boxes[..., 0]))[..., None, None]
+    with h5py.File(preds, "w") as f:
+        f.attrs.update(task="pose_estimation", units="pixels", source=str(sample / "clips.h5"),
+                       split="test", frame_start=0)
+        f["crop_pixels"], f["target_crop_pixels"] = crop_uv + 2.0, crop_uv
+        f["pixels"] = uv + 6.0
+        f["row"] = np.arange(n)
+        f["label"] = np.zeros(n, np.int64)
+        f["clip_id"] = np.arange(n)
+    size = 160
+    res = preview_predictions(preds, tmp_path / "p.png", clips=[0], size=size, frame="first")
+    assert res["background"] == "crops"
+    img = _read(tmp_path / "p.png")[3 * CAPTION:]
+    assert img.shape == (size, size, 3)
+    u0, v0, u1, v1 = boxes[0, 0]
+    s = size / (u1 - u0)
+    truth = (uv[0, 0] - [u0, v0]) * s
+    pred = (uv[0, 0] + 6.0 - [u0, v0]) * s
+    inside = [j for j in _separated(np.concatenate([truth, pred]), 6.0)
+              if j < 26 and 3 <= truth[j][0] < size - 3 and 3 <= truth[j][1] < size - 3]
+    assert len(inside) >= 3
+    for j in inside:
+        assert _disc(img, int(np.floor(truth[j][0])), int(np.floor(truth[j][1])), TRUTH)
+    # every pixel not drawn in the two skeleton colours is the crop itself (resized),
+    # not a blank square
+    import cv2
+
+    crop = cv2.resize(np.ascontiguousarray(rgb[0, 0]), (size, size),
+                      interpolation=cv2.INTER_LINEAR)
+    drawn = (img == TRUTH).all(-1) | (img == PREDICTION).all(-1)
+    assert 50 < drawn.sum() < size * size // 4
+    assert np.abs(img[~drawn].astype(int) - crop[~drawn]).max() <= 1
+    assert len(np.unique(img[~drawn].reshape(-1, 3), axis=0)) > 20
+    # a moved or missing source says so, and --clips-h5 points at it
+    with h5py.File(preds, "a") as f:
+        f.attrs["source"] = str(tmp_path / "gone.h5")
+    with pytest.raises(ValueError, match="gone.h5: the converted file of these predictions"):
+        preview_predictions(preds)
+    assert main(["predictions", str(preds), "--clips-h5", str(sample / "clips.h5"), "--out",
+                 str(tmp_path / "q.png")]) == 0
+
+
+def test_autoencoder_predictions_show_the_noisy_input(sample, tmp_path):
+    INPUT = (150, 150, 150)
+    with h5py.File(sample / "clips.h5", "r") as f:
+        gt = f["test/projection_2d"][:2].astype(np.float32)
+    noisy = gt + 25.0
+    noisy[:, :, ::3] = 0.0  # missing joints, as bsp-predict writes them
+    p = tmp_path / "ae.h5"
+    _write_preds(p, "autoencoder", gt + 1.0, gt, "pixels")
+    with h5py.File(p, "a") as f:
+        f["input_pixels"] = noisy
+    img = preview_predictions(p, None, size=160, cols=2)["images"][0]
+    assert (img == INPUT).all(-1).sum() > 30
+    # a missing joint is not drawn at (0, 0): the input's joints all lie in the panel's
+    # scaled frame, none is pulled to the corner where (0, 0) would land
+    scale_free = preview_predictions(p, None, size=160, cols=2, clips=[0])["images"][0]
+    assert (scale_free[3 * CAPTION:3 * CAPTION + 8, :8] == INPUT).all(-1).sum() == 0
+
+
+def test_lifting_predictions_front_and_side_without_piled_up_depth_labels(sample, tmp_path):
+    from bsp_fast.preview.plot3d import VIEWS, SkeletonFigure, depth_axis, limits
+
+    with h5py.File(sample / "clips.h5", "r") as f:
+        gt3 = f["test/targets/absolute_pose_loc"][:2]
+    p3 = tmp_path / "lift.h5"
+    _write_preds(p3, "lifting", gt3 + 0.05, gt3, "metres")
+    img = preview_predictions(p3, None, clip=0)["images"][0]
+    w = img.shape[1]
+    for half in (img[:, : w // 2], img[:, w // 2:]):  # both views hold both skeletons
+        for colour in (TRUTH, PREDICTION):
+            assert (np.abs(half.astype(int) - colour).max(-1) < 40).sum() > 20, colour
+    assert depth_axis(VIEWS["front"][1]) == "x" and depth_axis(VIEWS["side"][1]) == "y"
+    lo, hi = limits(gt3[0])
+    fig = SkeletonFigure([(v, VIEWS[v]) for v in ("front", "side")], lo, hi)
+    fig.render([[gt3[0, 0]], [gt3[0, 0]]])
+    for ax, depth in zip(fig.axes, ("x", "y")):
+        for name in "xyz":
+            texts = [t.get_text() for t in getattr(ax, f"{name}axis").get_ticklabels()]
+            if name == depth:  # seen end-on: no labels to pile up
+                assert not any(texts) and getattr(ax, f"get_{name}label")() == ""
+            else:
+                assert sum(bool(t) for t in texts) >= 3, (name, texts)

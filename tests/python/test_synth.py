@@ -271,8 +271,13 @@ def test_same_seed_same_bytes_for_1_and_2_workers(tmp_path):
     a = generate(tmp_path / "a", "sample", workers=1, **opts)
     b = generate(tmp_path / "b", "sample", workers=2, **opts)
     assert a["ids"] == b["ids"]
-    for name in ["data.csv", "config.yaml"] + [f"clips/{i}-{k}" for i in a["ids"]
-                                               for k in ("0.mp4", "1.apng")]:
+    # every file of both trees (a clip whose walker never enters the view has no media)
+    names = [sorted(str(p.relative_to(tmp_path / d)) for p in (tmp_path / d).rglob("*")
+                    if p.is_file()) for d in ("a", "b")]
+    assert names[0] == names[1]
+    assert {"data.csv", "config.yaml"} <= set(names[0])
+    assert sum(n.endswith((".mp4", ".apng")) for n in names[0]) == 2 * a["recordings"] > 0
+    for name in names[0]:
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
     c = generate(tmp_path / "c", "sample", workers=1, **dict(opts, seed=4))
     assert c["ids"] != a["ids"]
@@ -327,8 +332,10 @@ def test_cli_exit_codes(tmp_path, capsys):
 
 
 def test_drop_duplicates_option(tmp_path):
-    s = generate(tmp_path / "d", clips=1, frames=30, size="64x48", seed=5, workers=1,
+    # seed 6: the walker is in view (seed 5's never enters it: no rows, so no media)
+    s = generate(tmp_path / "d", clips=1, frames=30, size="64x48", seed=6, workers=1,
                  apng_drop_duplicates=True, progress=False)
+    assert s["recordings"] == 1
     im = Image.open(tmp_path / "d" / "clips" / f"{s['ids'][0]}-1.apng")
     assert 1 <= im.n_frames <= 30
 

@@ -19,7 +19,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "statistics table (scenes, annotated and crossing frames per age and "
                     "gender, annotated share). Each segmentation file is decoded once, files "
                     "spread over threads.",
-        epilog="Exit codes: 0 clean, 1 problems found (or data.csv unreadable), 2 bad "
+        epilog="Exit codes: 0 no errors (warnings alone, e.g. occluded rows, exit 0; "
+               "--strict makes them 1), 1 errors found (or data.csv unreadable), 2 bad "
                "arguments (missing dataset, --fix directory exists or overlaps the dataset). "
                "Gaps in frame.idx and event-camera files are notes, not problems.")
     p.add_argument("dataset", metavar="DATASET",
@@ -38,6 +39,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --fix: replace OUT_DIR if it exists")
     p.add_argument("--threads", type=int, metavar="N",
                    help="files decoded at once (default: all cores)")
+    p.add_argument("--strict", action="store_true",
+                   help="warnings (fully occluded rows, never-visible pedestrians, "
+                        "unreferenced media) fail too: exit 1")
     p.add_argument("--quiet", action="store_true",
                    help="print only the verdict line (and errors), no progress bar")
     return p
@@ -73,7 +77,14 @@ def main(argv=None) -> int:
     if args.quiet:
         text = text.rstrip("\n").rsplit("\n", 1)[-1] + "\n"
     sys.stdout.write(text)
-    return EXIT_CLEAN if report["clean"] else EXIT_PROBLEMS
+    return exit_code(report, args.strict)
+
+
+def exit_code(report: dict, strict: bool = False) -> int:
+    """0 without errors (and, with ``strict``, without warnings), else 1: warnings alone
+    pass, as in linters and test runners."""
+    failing = report["counts"]["error"] + (report["counts"]["warning"] if strict else 0)
+    return EXIT_PROBLEMS if failing else EXIT_CLEAN
 
 
 if __name__ == "__main__":

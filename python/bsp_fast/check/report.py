@@ -94,6 +94,11 @@ def format_report(report: dict, max_items: int = 20) -> str:
                    f"{fix['files_copied']} files; dropped {fix['recordings_dropped']} "
                    f"recordings, {fix['rows_dropped']} rows, {fix['files_dropped']} files "
                    f"(why: {_shown(fix['log'])})")
-    out.append("\nResult: " + ("clean" if report["clean"] else
-                               f"{len(findings)} problem(s) found"))
+    if report["clean"]:
+        verdict = "clean"
+    elif c["error"] == 0:
+        verdict = f"no errors, {c['warning']} warning(s) (--strict fails on warnings)"
+    else:
+        verdict = f"{len(findings)} problem(s) found"
+    out.append("\nResult: " + verdict)
     return "\n".join(out) + "\n"

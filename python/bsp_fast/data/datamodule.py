@@ -170,30 +170,55 @@ class BSPDataModule(_Base):
         _, csv = conversion.dataset_csv(self.dataset_dir)
         return _cache.stale_reason(self.h5_path, self.settings(), csv)
 
+    def _poses_only(self) -> bool:
+        """Whether the dataset's config.yaml says it was generated with --poses-only."""
+        from ..check.core import read_config
+
+        root, _ = conversion.dataset_csv(self.dataset_dir)
+        return read_config(str(root)).get("poses_only") is True
+
+    def _cache_note(self) -> str:
+        folder = self.h5_path.parent
+        n, size = _cache.cache_usage(folder)
+        return (f"cache {folder}: {n} file(s), {_cache.format_bytes(size)} "
+                f"(bsp-cache ls / bsp-cache prune {self.dataset_dir})")
+
     def prepare_data(self) -> None:
         """Converts ``dataset_dir`` into :attr:`h5_path` through the C++ core unless an
-        up-to-date conversion exists (then it says so and reuses it)."""
+        up-to-date conversion exists (then it says so and reuses it). Once done, later
+        calls (Lightning's fit, validate and test each call it) do nothing."""
         path = self.h5_path
+        if self.reused is not None and path.exists():
+            return
         if path.exists():
             why = self._stale()
             if why is None:
                 self.reused = True
-                if not self._given_h5 and self.dataset_dir is not None:
+                if self.dataset_dir is None:
+                    self._say(f"using {path} (no dataset directory given: not compared with "
+                              "a data.csv)")
+                    return
+                if not self._given_h5:
                     _, csv = conversion.dataset_csv(self.dataset_dir)
                     if csv.stat().st_mtime_ns > path.stat().st_mtime_ns:
                         os.utime(path)  # data.csv was CRC-checked: not again next time
+                    _cache.mark_used(path)
                 self._say(f"reusing {path} (same conversion options and data.csv)")
                 return
             if self._given_h5:
                 raise ValueError(f"{path} is not the conversion this data module asks for: "
                                  f"{why}; delete it, pass another h5_path, or leave h5_path "
                                  "out to use the cache")
+            self._check_media()
             self._say(f"converting again: {path.name} is out of date ({why})")
         elif self.dataset_dir is None:
             raise FileNotFoundError(f"{path}: no such HDF5 file and no dataset_dir to "
                                     "convert it from")
         else:
-            self._say(f"converting {self.dataset_dir} -> {path} (first use of these options)")
+            self._check_media()
+            note = "" if self._given_h5 else f"; {self._cache_note()}"
+            self._say(f"converting {self.dataset_dir} -> {path} (first use of these "
+                      f"options{note})")
         self.conversion_report = conversion.convert(
             self.dataset_dir, path, force=True,
             progress=None if self.verbose and _rank_zero() else False,
@@ -202,17 +227,37 @@ class BSPDataModule(_Base):
         lines = conversion.format_report(self.conversion_report).splitlines()
         for line in lines[:4] + [x for x in lines[4:] if x.startswith("WARNING")]:
             self._say(line)
+        if not self._given_h5:
+            self._say(f"added {_cache.format_bytes(path.stat().st_size)} to the {self._cache_note()}")
+
+    def _check_media(self) -> None:
+        """A poses-only dataset has no MP4/APNG to crop: say so before the converter fails
+        on the first missing video."""
+        if self.convert_options.get("media") and self._poses_only():
+            need = ("pose estimation needs the media (its inputs are the video crops)"
+                    if self.task == "pose_estimation" else "media=True needs them")
+            raise ValueError(
+                f"{self.dataset_dir} was generated with --poses-only (its config.yaml says "
+                f"poses_only: true): it has data.csv but no MP4/APNG files, and {need}. "
+                "Generate the dataset without --poses-only (bsp-synth OUT_DIR), or use a "
+                "recorded one")
 
     def _check_file(self, ds: ClipDataset) -> None:
         a = ds.attrs
         checks = [("clip_length", self._explicit["clip_length"], a.get("clip_length")),
                   ("clip_offset", self._explicit["clip_offset"], a.get("clip_stride")),
                   ("benchmark", self.benchmark_windows or None, bool(a.get("benchmark", 0)))]
+        wanted, stored = {}, {}
         for name, want, have in checks:
             if want is not None and have is not None and want != type(want)(have):
-                raise ValueError(f"{self.h5_path}: file has {name}={have!r} but the data module "
-                                 f"asks for {want!r}; pass another h5_path or delete the file "
-                                 "to reconvert")
+                wanted[name], stored[name] = want, type(want)(have)
+        if wanted:
+            raise ValueError(
+                f"{self.h5_path} was converted with other options: "
+                f"{_cache.describe_difference(stored, wanted)}. Use the file's values "
+                "(leave these options out), or convert again with yours: give the dataset "
+                "directory instead of the file (converted on first use, and cached), or "
+                "bsp-convert DATASET OUT.h5 with these options")
 
     def setup(self, stage: str | None = None) -> None:
         """Opens the splits (converting first if :meth:`prepare_data` has not run)."""

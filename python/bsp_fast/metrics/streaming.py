@@ -17,7 +17,8 @@ from . import classification as _cls
 from . import pose2d as _p2
 from . import pose3d as _p3
 
-__all__ = ["ClassificationMetrics", "PCK", "MPJPE", "NMPJPE", "PAMPJPE", "MPJVE",
+__all__ = ["ClassificationMetrics", "BinaryF1Score", "BinaryPrecision", "BinaryRecall",
+           "BinaryAccuracy", "classification_collection", "PCK", "MPJPE", "NMPJPE", "PAMPJPE", "MPJVE",
            "MaskedMSE", "MissingJointRatio"]
 
 
@@ -127,11 +128,9 @@ class PCK(Metric):
         return int(self.frames)
 
 
-class ClassificationMetrics(Metric):
-    """Streaming F1 / precision / recall / accuracy of the crossing class from summed
-    confusion counts: ``update(pred, target)`` (labels or logits, see
-    :mod:`~bsp_fast.metrics.classification`); ``compute()`` -> dict of float64 tensors
-    ``{"f1", "precision", "recall", "accuracy"}``; ``confusion_matrix()`` -> 2x2."""
+class _Confusion(Metric):
+    """Summed confusion counts ``tp, fp, fn, tn`` of the crossing class (shared state of
+    the classification metrics: a ``MetricCollection`` of them updates it once)."""
 
     is_differentiable = False
     higher_is_better = True
@@ -146,12 +145,72 @@ class ClassificationMetrics(Metric):
         for name, value in zip(("tp", "fp", "fn", "tn"), _cls.confusion_counts(pred, target)):
             _accumulate(self, name, value)
 
-    def compute(self) -> dict:
-        scores = _cls.scores_from_counts(self.tp, self.fp, self.fn, self.tn)
-        return {k: torch.tensor(v, dtype=torch.float64, device=self.tp.device)
-                for k, v in scores.items()}
+    def _scores(self) -> dict:
+        return _cls.scores_from_counts(self.tp, self.fp, self.fn, self.tn)
 
     def confusion_matrix(self) -> torch.Tensor:
         """``[[tn, fp], [fn, tp]]`` (rows = true class) of everything seen so far (this
         process's counts; after ``compute()`` under DDP, while synced, the global ones)."""
         return torch.stack([torch.stack([self.tn, self.fp]), torch.stack([self.fn, self.tp])])
+
+
+class ClassificationMetrics(_Confusion):
+    """Streaming F1 / precision / recall / accuracy of the crossing class from summed
+    confusion counts: ``update(pred, target)`` (labels or logits, see
+    :mod:`~bsp_fast.metrics.classification`); ``compute()`` -> dict of float64 tensors
+    ``{"f1", "precision", "recall", "accuracy"}``; ``confusion_matrix()`` -> 2x2.
+    The torchmetrics-style single metrics are :class:`BinaryF1Score`,
+    :class:`BinaryPrecision`, :class:`BinaryRecall`, :class:`BinaryAccuracy`, and
+    :func:`classification_collection` groups them."""
+
+    def compute(self) -> dict:
+        return {k: torch.tensor(v, dtype=torch.float64, device=self.tp.device)
+                for k, v in self._scores().items()}
+
+
+class _OneScore(_Confusion):
+    score = ""
+
+    def compute(self) -> torch.Tensor:
+        return torch.tensor(self._scores()[self.score], dtype=torch.float64,
+                            device=self.tp.device)
+
+
+class BinaryF1Score(_OneScore):
+    """Streaming F1 of the crossing class (one tensor, as ``torchmetrics``'s
+    ``BinaryF1Score``): ``update(pred, target)`` with labels or logits (threshold and
+    argmax rules of :mod:`~bsp_fast.metrics.classification`); 0 when nothing is
+    predicted or true (no NaN)."""
+
+    score = "f1"
+
+
+class BinaryPrecision(_OneScore):
+    """Streaming precision of the crossing class (see :class:`BinaryF1Score`)."""
+
+    score = "precision"
+
+
+class BinaryRecall(_OneScore):
+    """Streaming recall of the crossing class (see :class:`BinaryF1Score`)."""
+
+    score = "recall"
+
+
+class BinaryAccuracy(_OneScore):
+    """Streaming accuracy (see :class:`BinaryF1Score`)."""
+
+    score = "accuracy"
+
+
+def classification_collection(prefix: str | None = None, postfix: str | None = None):
+    """A ``torchmetrics.MetricCollection`` of :class:`BinaryF1Score`,
+    :class:`BinaryPrecision`, :class:`BinaryRecall` and :class:`BinaryAccuracy` under the
+    keys ``f1``, ``precision``, ``recall``, ``accuracy`` (with ``prefix``/``postfix``, e.g.
+    ``prefix="val/"``). Their states are the same confusion counts, so the collection
+    updates one set of counts per batch (torchmetrics' compute groups)."""
+    from torchmetrics import MetricCollection
+
+    return MetricCollection({"f1": BinaryF1Score(), "precision": BinaryPrecision(),
+                             "recall": BinaryRecall(), "accuracy": BinaryAccuracy()},
+                            prefix=prefix, postfix=postfix, compute_groups=True)

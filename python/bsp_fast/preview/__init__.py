@@ -8,11 +8,19 @@ segmentation), ``preview_clips`` (a contact sheet of converted clips), ``preview
 """
 from __future__ import annotations
 
-from .clips import preview_clips
-from .draw import colourise, draw_skeleton
-from .frames import preview_frames
-from .pose3d import preview_pose3d
-from .predictions import preview_predictions, read_predictions
+# Imported on first access, so that ``bsp-preview`` (the cli module of this package) can
+# say which extra to install when OpenCV or matplotlib is missing instead of failing here.
+_NAMES = {"preview_clips": "clips", "colourise": "draw", "draw_skeleton": "draw",
+          "preview_frames": "frames", "preview_pose3d": "pose3d",
+          "preview_predictions": "predictions", "read_predictions": "predictions"}
 
 __all__ = ["preview_frames", "preview_clips", "preview_pose3d", "preview_predictions",
            "read_predictions", "draw_skeleton", "colourise"]
+
+
+def __getattr__(name: str):
+    if name in _NAMES:
+        import importlib
+
+        return getattr(importlib.import_module(f"{__name__}.{_NAMES[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -30,7 +30,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "and segmentation, a contact sheet of converted clips, a clip's 3D "
                     "skeleton, or predictions against the ground truth. Bones are coloured "
                     "by side: left blue, right orange, centre green.",
-        epilog="Exit codes: 0 written, 1 unreadable input (media, HDF5), 2 bad arguments "
+        epilog="Exit codes: 0 written, 1 unreadable input (media, HDF5) or the 'preview' "
+               "extra (OpenCV, matplotlib) not installed, 2 bad arguments "
                "(unknown recording or clip, OUT exists without --force, wrong extension). "
                "Details: docs/preview.md.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -96,7 +97,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("predictions", help="ground truth vs predictions of bsp-predict",
                        description="Ground truth (green) against the prediction (magenta): "
-                                   "2D tasks as a sheet of clips, lifting as 3D side by side.")
+                                   "2D tasks as a sheet of clips (pose estimation on its crops, "
+                                   "the autoencoder over its noisy input in grey), lifting in "
+                                   "3D from the front and from the side.")
     r.add_argument("preds_h5", metavar="PREDS.h5", help="output of bsp-predict")
     r.add_argument("--n", type=int, default=16, help="2D: clips to draw (default: 16)")
     r.add_argument("--clips", type=_ints, metavar="I,J,...", help="2D: clip indices instead")
@@ -106,6 +109,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--size", help="2D: panel side in pixels (default: 160); lifting: WxH "
                                   "(default: 800x400)")
     r.add_argument("--cols", type=int, help="2D: panels per row (default: about square)")
+    r.add_argument("--clips-h5", metavar="CLIPS.h5",
+                   help="pose estimation: the converted file holding the crops (default: the "
+                        "one bsp-predict read, its 'source' attribute)")
     _common(r, 10.0)
     return p
 
@@ -131,7 +137,7 @@ def _run(args) -> dict:
         size = int(size)
     return preview_predictions(args.preds_h5, args.out, clips=args.clips, n=args.n,
                                clip=args.clip, frame=args.frame, size=size, cols=args.cols,
-                               fps=args.fps, force=args.force)
+                               fps=args.fps, force=args.force, clips_h5=args.clips_h5)
 
 
 def main(argv=None) -> int:
@@ -144,6 +150,9 @@ def main(argv=None) -> int:
 
     try:
         res = _run(args)
+    except ImportError as e:  # an optional dependency: the message names the extra
+        print(f"bsp-preview: {e}", file=sys.stderr)
+        return EXIT_ERROR
     except (ValueError, FileNotFoundError, FileExistsError) as e:
         print(f"bsp-preview: {e}", file=sys.stderr)
         return EXIT_USAGE

@@ -1,11 +1,13 @@
 """``bsp-preview clips``: a contact sheet of the clips of a bsp-convert HDF5 file."""
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
+from .._extras import require
 from . import draw
 from .output import check_output, output_format, save
+
+cv2 = require("cv2", "bsp-preview")
 
 SPLITS = ("train", "val", "test")
 CAPTION_LINES = 3

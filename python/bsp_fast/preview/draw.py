@@ -6,11 +6,13 @@ column j covers u in [j, j + 1)) is drawn centred on pixel (floor(u), floor(v)).
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
+from .._extras import require
 from .. import skeleton as sk
 from ..media import CITYSCAPES_PALETTE
+
+cv2 = require("cv2", "bsp-preview")
 
 #: Bone and joint colours (RGB) by side of the body.
 LEFT = (0, 170, 255)
@@ -20,6 +22,8 @@ BBOX = (255, 255, 255)
 #: Ground truth and prediction colours of `bsp-preview predictions`.
 TRUTH = (60, 230, 60)
 PREDICTION = (255, 0, 255)
+#: The autoencoder's noisy input in `bsp-preview predictions`.
+INPUT = (150, 150, 150)
 CAPTION_BG = (24, 24, 24)
 CAPTION_FG = (235, 235, 235)
 FONT = cv2.FONT_HERSHEY_SIMPLEX

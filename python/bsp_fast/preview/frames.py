@@ -3,14 +3,16 @@ from __future__ import annotations
 
 import os
 
-import cv2
 import numpy as np
 
+from .._extras import require
 from ..check.core import dataset_paths, read_config
 from ..csvio import CROSSING, read_csv
 from ..media import ApngReader, VideoReader
 from . import draw
 from .output import check_output, output_format, parse_frames, save
+
+cv2 = require("cv2", "bsp-preview")
 
 LAYOUTS = ("side", "blend", "rgb")
 _COLUMNS = ["id", "camera.idx", "pedestrian.idx", "frame.idx", "camera.recording",

@@ -5,11 +5,13 @@ from __future__ import annotations
 import itertools
 import os
 
-import cv2
 import numpy as np
 
+from .._extras import require
 from ..atomic import write_bytes
 from ..media import VideoWriter
+
+cv2 = require("cv2", "bsp-preview")
 
 FORMATS = ("png", "mp4")
 

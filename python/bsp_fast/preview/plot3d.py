@@ -22,6 +22,13 @@ def _rgb01(c) -> tuple:
     return tuple(float(x) / 255 for x in c)
 
 
+def depth_axis(azim: float) -> str:
+    """``"x"`` or ``"y"``: the horizontal axis closer to the line of sight of a view from
+    azimuth ``azim`` degrees (matplotlib's convention: 0 looks along -x, -90 along +y)."""
+    a = np.radians(azim)
+    return "x" if abs(np.cos(a)) >= abs(np.sin(a)) else "y"
+
+
 def limits(points, pad: float = 0.1) -> tuple:
     """Equal-range cube (lo (3,), hi (3,)) around all finite (..., 3) points."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
@@ -44,8 +51,12 @@ class SkeletonFigure:
 
     def __init__(self, panels, lo, hi, size=(800, 400), n_skeletons: int = 1,
                  colours=None, suptitle: str = ""):
+        from .._extras import require
+
+        require("matplotlib", "bsp-preview (3D views)")
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
+        from matplotlib.ticker import NullFormatter
 
         w, h = int(size[0]), int(size[1])
         self.size = (w, h)
@@ -63,8 +74,13 @@ class SkeletonFigure:
             ax.set_box_aspect((1, 1, 1), zoom=1.25)
             ax.set_xlabel("x (m)", fontsize=7, labelpad=-8)
             ax.set_ylabel("y (m)", fontsize=7, labelpad=-8)
-            ax.set_zlabel("z (m)", fontsize=7, labelpad=-8)
+            ax.set_zlabel("z (m)", fontsize=7, labelpad=-1)
             ax.tick_params(labelsize=6, pad=-2)
+            # The horizontal axis along the line of sight is seen end-on: its tick labels
+            # would pile up on each other, so it shows none (the other two carry the scale).
+            depth = depth_axis(azim)
+            getattr(ax, f"{depth}axis").set_major_formatter(NullFormatter())
+            getattr(ax, f"set_{depth}label")("")
             ax.set_title(name, fontsize=9)
             per = []
             for s in range(n_skeletons):

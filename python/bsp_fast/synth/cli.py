@@ -74,6 +74,10 @@ def _print_summary(s: dict) -> None:
     print(f"wrote {s['clips']} clips to {s['out_dir']} in {s['seconds']:.1f} s "
           f"({s['clips_per_second']:.3f} clips/s)"
           + ("; poses only: no MP4/APNG written" if s.get("poses_only") else ""))
+    empty = s["clips"] - s["recordings"]
+    if empty:
+        print(f"{s['recordings']} recordings: in {empty} clip(s) the walker never enters the "
+              "view (no rows, no media files)")
     print(f"annotated frames: {s['annotated_frames']} of {s['frames']} "
           f"({100 * s['annotated_share']:.1f} %), crossing: {s['crossing_frames']} "
           f"({100 * s['crossing_share']:.1f} % of annotated), crossing clips: "

@@ -29,7 +29,9 @@ def _clip_job(cfg: SynthConfig, index: int, root: str, threads: int) -> dict:
     motion = mo.load(cfg.motion, float(cfg.fps)) if cfg.motion else None
     cp = cl.plan_clip(cfg, index, motion)
     per_frame = cl.pose_columns(cp, cfg)
-    if cfg.poses_only:  # the same in_segmentation flags, no media written
+    # A walker that never enters the view has no row: writing its MP4/APNG would leave
+    # files no row references (bsp-check: unreferenced_media), so it gets none.
+    if cfg.poses_only or not per_frame["annotated"].any():
         visible = cl.segmentation_visibility(cp, cfg, per_frame, threads)
     else:
         visible = cl.render_clip(cp, cfg, per_frame, os.path.join(root, "clips"), threads)
@@ -94,6 +96,7 @@ def _summary(cfg: SynthConfig, stats: list, seconds: float, out_dir: str) -> dic
         "annotated_frames": annotated, "annotated_share": annotated / frames if frames else 0.0,
         "crossing_frames": crossing, "crossing_share": crossing / annotated if annotated else 0.0,
         "crossing_clips": sum(int(s["crossing"]) for s in stats),
+        "recordings": sum(s["annotated"] > 0 for s in stats),
         "per_profile": dict(sorted(per_profile.items())), "seconds": seconds,
         "clips_per_second": len(stats) / seconds if seconds > 0 else 0.0,
         "ids": [s["id"] for s in stats], "seed": cfg.seed, "preset": cfg.preset,
@@ -130,7 +133,8 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
         The output is byte-identical (docs/distributed.md).
 
     Summary keys: out_dir, clips, frames, annotated_frames, annotated_share,
-    crossing_frames, crossing_share, crossing_clips, per_profile {name: {clips,
+    crossing_frames, crossing_share, crossing_clips, recordings (clips with a row: the
+    walker of the others never enters the view, and they have no media files), per_profile {name: {clips,
     annotated_frames, crossing_clips}}, seconds, clips_per_second, ids, seed, preset,
     poses_only.
     """

@@ -54,8 +54,9 @@ def plot_curves(run_dir, task: str, out_path=None, initial: dict | None = None,
     logs = read_logs(run_dir)
     if not any(k.startswith(("train/", "val/")) for k in logs):
         return None
-    import matplotlib
+    from .._extras import require
 
+    matplotlib = require("matplotlib", "bsp-train (curves.png)", extra="torch")
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
 

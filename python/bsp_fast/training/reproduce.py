@@ -32,14 +32,23 @@ YES, NO, NA = "reproduced", "not reproduced", "n/a"
 
 
 # ---------------------------------------------------------------------- table files
+def experiments_dirs() -> list:
+    """Where table files are looked up, in order: ``$BSP_EXPERIMENTS``, ``./experiments``,
+    the tables installed with the package (``bsp_fast/experiments``), the source tree's
+    ``experiments/``."""
+    from importlib import resources
+
+    dirs = [Path(os.environ["BSP_EXPERIMENTS"])] if os.environ.get("BSP_EXPERIMENTS") else []
+    dirs += [Path.cwd() / "experiments",
+             Path(str(resources.files("bsp_fast").joinpath("experiments"))),
+             Path(__file__).resolve().parents[3] / "experiments"]
+    return dirs
+
+
 def experiments_dir() -> Path:
-    """``$BSP_EXPERIMENTS``, else ``./experiments``, else the repository's ``experiments/``."""
-    if os.environ.get("BSP_EXPERIMENTS"):
-        return Path(os.environ["BSP_EXPERIMENTS"])
-    here = Path.cwd() / "experiments"
-    if here.is_dir():
-        return here
-    return Path(__file__).resolve().parents[3] / "experiments"
+    """The first of :func:`experiments_dirs` that exists (else the last)."""
+    dirs = experiments_dirs()
+    return next((d for d in dirs if d.is_dir()), dirs[-1])
 
 
 def load_table(table) -> dict:
@@ -51,7 +60,12 @@ def load_table(table) -> dict:
         if str(table) not in TABLES:
             raise ValueError(f"unknown table {table!r}; allowed: {', '.join(TABLES)} "
                              "(or a path to a table YAML)")
-        path = experiments_dir() / f"{table}.yaml"
+        dirs = experiments_dirs()
+        path = next((d / f"{table}.yaml" for d in dirs if (d / f"{table}.yaml").is_file()),
+                    None)
+        if path is None:
+            raise ValueError(f"no table file {table}.yaml in " + ", ".join(map(str, dirs))
+                             + " (a broken install? --table FILE.yaml reads your own)")
     if not path.is_file():
         raise ValueError(f"{path}: no such table file")
     doc = yaml.safe_load(path.read_text(encoding="utf-8"))
@@ -330,7 +344,10 @@ def build_parser() -> argparse.ArgumentParser:
                "only), quick (2-core CPU, < 30 min per table on bsp-synth data), full (the "
                "report's epochs, GPU). Exit codes: 0 done, 1 a run failed or bad data, 2 bad "
                "arguments. docs: docs/reproduce.md")
-    p.add_argument("table", metavar="TABLE", help="table name or path to a table YAML")
+    p.add_argument("table", metavar="TABLE", nargs="?",
+                   help="table name (installed with bsp_fast) or path to a table YAML")
+    p.add_argument("--table", dest="table_file", metavar="FILE.yaml",
+                   help="your own table file instead of TABLE (docs/reproduce.md, table files)")
     p.add_argument("--data", required=True, metavar="DATASET_OR_H5",
                    help="CARLA-BSP dataset directory (e.g. from bsp-synth) or a bsp-convert "
                         "HDF5 file")
@@ -353,9 +370,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    ns = build_parser().parse_args(argv)
+    parser = build_parser()
+    ns = parser.parse_args(argv)
+    if (ns.table is None) == (ns.table_file is None):
+        parser.error("give a TABLE name or --table FILE.yaml (one of them)")
+    if ns.table_file is not None and Path(ns.table_file).suffix not in (".yaml", ".yml"):
+        parser.error(f"--table {ns.table_file}: a table file ends in .yaml or .yml")
     try:
-        tab = load_table(ns.table)
+        tab = load_table(ns.table or ns.table_file)
         overrides = C.parse_hp(ns.set)
         rows = [r.strip() for r in ns.rows.split(",") if r.strip()] if ns.rows else None
         res = reproduce(tab, ns.data, ns.budget, ns.out, rows=rows, overrides=overrides,

@@ -170,17 +170,18 @@ def check_precision(precision: str, accelerator: str) -> None:
 def _extra_logger(kind: str, tmp: Path, name: str):
     import importlib.util
 
+    from .._extras import install_hint
+
     if kind == "csv":
         return None
     if kind == "tensorboard":
         if not any(importlib.util.find_spec(m) for m in ("tensorboard", "tensorboardX")):
-            raise C.ConfigError("--logger tensorboard needs the tensorboard package "
-                                "(pip install tensorboard)")
+            raise C.ConfigError(install_hint("tensorboard", "--logger tensorboard"))
         from lightning.pytorch.loggers import TensorBoardLogger
 
         return TensorBoardLogger(save_dir=str(tmp), name="tensorboard", default_hp_metric=False)
     if importlib.util.find_spec("wandb") is None:
-        raise C.ConfigError("--logger wandb needs the wandb package (pip install wandb)")
+        raise C.ConfigError(install_hint("wandb", "--logger wandb"))
     from lightning.pytorch.loggers import WandbLogger
 
     return WandbLogger(save_dir=str(tmp), name=name, project="bsp_fast", offline=True)
