@@ -62,6 +62,7 @@ def test_openpose_import_maps_thresholds_and_labels(tmp_path):
         starts = np.concatenate([f[s]["meta/start_frame"][()] for s in ("train", "val", "test")])
         labels_out = np.concatenate([f[s]["labels"][()] for s in ("train", "val", "test")])
         assert f.attrs["source_format"] == "body25" and f.attrs["visibility_threshold"] == 0.3
+        assert f.attrs["labels_source"] == "csv"
         assert f["train/meta/clip_width"][0] == W
     assert len(vids) == 4  # 2 tracks x 2 clips of 4 frames
     for i, (video, start) in enumerate(zip(vids, starts)):
@@ -88,6 +89,7 @@ def test_untracked_people_need_a_tracker_or_best(tmp_path):
     with h5py.File(tmp_path / "o.h5") as f:
         g = f["train"]
         assert list(g["meta/pedestrian_id"].asstr()[()]) == ["0"]
+        assert f.attrs["labels_source"] == "none" and not g["labels"][()].any()
         assert g["projection_2d"][0, 0, J["crl_Head__C"], 0] == body25(0)[0, 0]  # higher score
 
 

@@ -174,7 +174,8 @@ def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3
                   joints_at_origin=int(at_origin.sum()),
                   joints=[n for n, p in zip(CARLA.joints, m.present) if p],
                   settings=dict(st, source=det.source, source_joints=det.joints,
-                                threshold=float(threshold), derive=bool(derive)))
+                                threshold=float(threshold), derive=bool(derive),
+                                labels="csv" if labels is not None else "none"))
     with atomic_output(out, force=force) as tmp:
         _write(tmp, plan, rows, names, st, report, m)
     report["output"] = str(out)
@@ -245,6 +246,7 @@ def _write(path, plan: dict, rows: dict, names: dict, st: dict, report: dict, m)
                      source_path=report["settings"]["source"],
                      source_format=m.source.name, joints_mapped=m.present.astype(np.uint8),
                      visibility_threshold=report["settings"]["threshold"],
+                     labels_source=report["settings"]["labels"],
                      settings_json=json.dumps(report["settings"], sort_keys=True))
         for k, v in attrs.items():
             f.attrs[k] = v
