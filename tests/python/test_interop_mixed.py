@@ -100,3 +100,27 @@ def test_config_and_bad_options(files):
         MixedDataModule([dict(name="a", h5_path="x", share=1.0)], task="lifting")
     with pytest.raises(ValueError, match="sources .* have a share but no clips"):
         MixedBatchSampler([5, 0], [0.5, 0.5], 10, 2, seed=1)
+
+
+def test_lightning_fit_draws_the_shares_every_epoch(files):
+    pl = pytest.importorskip("lightning.pytorch")
+    from bsp_fast.training.tasks import AutoencoderTask
+
+    dm = _dm(files, noise=2.0)
+    dm.epoch_size, dm.batch_size = 60, 20
+    seen = []
+
+    class Record(pl.Callback):
+        def on_train_batch_start(self, trainer, module, batch, batch_idx):
+            seen.append((trainer.current_epoch, batch["meta"]["source"], batch["meta"]["index"]))
+
+    module = AutoencoderTask("simple_transformer", {"num_layers": 1, "dim_feedforward": 8})
+    trainer = pl.Trainer(max_epochs=2, accelerator="cpu", logger=False, callbacks=[Record()],
+                         enable_checkpointing=False, enable_progress_bar=False,
+                         enable_model_summary=False, limit_val_batches=1)
+    trainer.fit(module, datamodule=dm)
+    for epoch in (0, 1):
+        src = torch.cat([s for e, s, _ in seen if e == epoch])
+        assert torch.bincount(src, minlength=3).tolist() == [6, 24, 30]
+    first = [i for e, _, i in seen if e == 0][0]
+    assert not torch.equal(first, [i for e, _, i in seen if e == 1][0])  # epoch 1 redraws
