@@ -10,6 +10,7 @@
     python -m bsp_fast preview ...      same as bsp-preview
     python -m bsp_fast check ...        same as bsp-check
     python -m bsp_fast cache ...        same as bsp-cache
+    python -m bsp_fast interop ...      same as bsp-interop
 """
 from __future__ import annotations
 
@@ -42,7 +43,8 @@ def main(argv=None) -> int:
         module = importlib.import_module(f"bsp_fast.training.{training[argv[0]]}")
         return module.main(argv[1:])
     tools = {"preview": "bsp_fast.preview.cli", "check": "bsp_fast.check.cli",
-             "cache": "bsp_fast.data.cache_cli"}
+             "cache": "bsp_fast.data.cache_cli",
+             "interop": "bsp_fast.interop.cli"}
     if argv and argv[0] in tools:
         import importlib
 

@@ -1,0 +1,252 @@
+"""Imported 2D detections -> a clip file in the bsp-convert HDF5 schema (2D tasks).
+
+The rows are mapped onto CARLA-26 (:mod:`bsp_fast.skeletons`), a joint counts as
+``visible`` when its confidence is at least ``threshold`` (and above 0), and the clips are
+planned by the C++ core's planner (``plan_clips``, the one bsp-convert uses), so clip
+length, offsets, the benchmark's time-to-event windows, labels, the in-image filter, the
+seeded split by video and balancing follow the same rules. Recordings are the (video,
+track) pairs; the split's units are the videos. Rows are ordered by (video, track, frame)
+first, so the same detections in any order give the same file.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from .. import __version__
+from .._native import core as _core
+from ..atomic import atomic_output
+from ..defaults import CONVERT
+from ..skeletons import CARLA, skeleton_map
+from .readers import BadInput, Detections
+
+__all__ = ["clip_settings", "write_clip_file"]
+
+_STR_META = ("video_id", "pedestrian_id", "age", "gender", "model", "map")
+
+
+def _positive(name, v):
+    if v is not None and (not isinstance(v, int) or isinstance(v, bool) or v <= 0):
+        raise ValueError(f"{name} must be a positive integer, got {v!r}")
+
+
+def clip_settings(*, clip_length=None, clip_offset=None, eval_clip_offset=None,
+                  min_video_length=None, label=CONVERT["label"], benchmark=False,
+                  val_frac=CONVERT["val_frac"], test_frac=CONVERT["test_frac"],
+                  seed=CONVERT["seed"], balance=False) -> dict:
+    """bsp-convert's clip options, validated and resolved the same way (defaults from
+    :data:`bsp_fast.defaults.CONVERT`); raises ValueError listing what is allowed."""
+    if clip_length is None:
+        clip_length = CONVERT["benchmark_clip_length"] if benchmark else CONVERT["clip_length"]
+    if clip_offset is None:
+        clip_offset = CONVERT["benchmark_clip_offset"] if benchmark else clip_length
+    for name, v in (("clip_length", clip_length), ("clip_offset", clip_offset),
+                    ("eval_clip_offset", eval_clip_offset), ("min_video_length", min_video_length)):
+        _positive(name, v)
+    for name, v in (("val_frac", val_frac), ("test_frac", test_frac)):
+        if not (isinstance(v, (int, float)) and 0 <= v < 1):
+            raise ValueError(f"{name} must lie in [0, 1), got {v!r}")
+    if val_frac + test_frac >= 1:
+        raise ValueError("val_frac + test_frac must be below 1")
+    fraction = 0.0
+    if label != "last":
+        try:
+            fraction = float(label[4:]) if str(label).startswith("any:") else -1.0
+        except ValueError:
+            fraction = -1.0
+        if not 0.0 < fraction <= 1.0:
+            raise ValueError(f"label must be 'last' or 'any:F' with 0 < F <= 1, got {label!r}")
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    return dict(clip_length=clip_length, clip_offset=clip_offset,
+                eval_clip_offset=eval_clip_offset or clip_offset,
+                min_video_length=min_video_length or clip_length, label=label,
+                label_fraction=fraction, benchmark=bool(benchmark), val_frac=val_frac,
+                test_frac=test_frac, seed=seed, balance=bool(balance))
+
+
+def _codes(names: list) -> tuple:
+    uniq = sorted(set(names))
+    index = {n: i for i, n in enumerate(uniq)}
+    return np.array([index[n] for n in names], np.int64), uniq
+
+
+def _longest_runs(video, track, frame) -> dict:
+    """(video, track) -> longest run of consecutive frames (rows sorted by key, frame)."""
+    runs: dict = {}
+    run = 0
+    for i in range(len(frame)):
+        same = i > 0 and video[i] == video[i - 1] and track[i] == track[i - 1]
+        run = run + 1 if same and frame[i] == frame[i - 1] + 1 else 1
+        key = (video[i], track[i])
+        runs[key] = max(runs.get(key, 0), run)
+    return runs
+
+
+def _crossing(det: Detections, labels, order) -> np.ndarray:
+    if labels is None:
+        return np.zeros(len(order), np.uint8)
+    out = np.zeros(len(order), np.uint8)
+    missing = []
+    for k, i in enumerate(order):
+        value = labels.get((det.video[i], det.track[i], int(det.frame[i])))
+        if value is None:
+            missing.append(i)
+        else:
+            out[k] = value
+    if missing:
+        i = missing[0]
+        raise BadInput(f"labels: no row for video {det.video[i]!r} track {det.track[i]!r} frame "
+                       f"{int(det.frame[i])} ({det.where[i]}) and {len(missing) - 1} more "
+                       "detections; every detected frame needs a crossing label")
+    return out
+
+
+def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3,
+                    derive: bool = True, skip_short: bool = False, force: bool = False,
+                    **clip_options) -> dict:
+    """Writes the clips of ``det`` to ``out`` (HDF5, docs/interop.md) and returns a report.
+
+    ``labels``: ``{(video, track, frame): crossing}`` (:func:`read_labels`); without it
+    every label is 0 (autoencoder data). ``threshold``: minimum confidence of a visible
+    joint. ``derive``: the skeleton map's standard derivations (hips, neck from COCO).
+    A track whose longest run of consecutive frames is shorter than a clip is an error
+    unless ``skip_short`` (then it is left out and listed). ``clip_options``: those of
+    :func:`clip_settings`. Nothing is left behind on error."""
+    if not isinstance(threshold, (int, float)) or not 0 <= threshold <= 1e6:
+        raise ValueError(f"threshold must be a number >= 0, got {threshold!r}")
+    st = clip_settings(**clip_options)
+    L = st["clip_length"]
+    if len(det.frame) == 0:
+        raise BadInput(f"{det.source}: no detection to import")
+    vcode, videos = _codes(det.video)
+    tcode, tracks = _codes(det.track)
+    order = np.lexsort((det.frame, tcode, vcode))
+    runs = _longest_runs(vcode[order], tcode[order], det.frame[order])
+    short = {k: n for k, n in runs.items() if n < L}
+    skipped = [f"video {videos[v]!r} track {tracks[t]!r}: longest run of consecutive frames "
+               f"{n} < clip length {L}" for (v, t), n in short.items()]
+    if short and not skip_short:
+        raise BadInput(f"{det.source}: {len(short)} track(s) shorter than a clip: "
+                       + "; ".join(skipped[:5]) + ("; ..." if len(skipped) > 5 else "")
+                       + "; pass skip_short (--skip-short-tracks) to leave them out; "
+                       "nothing written")
+    if short:
+        order = np.array([i for i in order if (vcode[i], tcode[i]) not in short], np.int64)
+        if len(order) == 0:
+            raise BadInput(f"{det.source}: every track is shorter than a clip of {L} frames; "
+                           "nothing written")
+    crossing = _crossing(det, labels, order)
+    m = skeleton_map(det.joints, CARLA, derive)
+    scores = det.scores[order]
+    seen = (scores >= threshold) & (scores > 0)
+    uv, visible = m.apply(det.points[order], seen, fill=0.0)
+    conf, _ = m.apply(scores[..., None], seen, fill=0.0)
+    at_origin = visible & (uv[..., 0] == 0) & (uv[..., 1] == 0)
+    visible &= ~at_origin  # the loaders read (0, 0) as missing: say so in the report
+    uv = np.where(visible[..., None], uv, 0.0).astype(np.float32)
+    conf = np.where(visible, conf[..., 0], 0.0).astype(np.float32)
+    rows = dict(video=vcode[order], track=tcode[order], frame=det.frame[order],
+                width=det.width[order], height=det.height[order], crossing=crossing,
+                uv=uv, visible=visible, confidence=conf)
+    plan = _core.plan_clips(
+        rows["video"].astype(np.int32), np.zeros(len(order), np.int64), rows["track"],
+        rows["frame"], crossing, uv, rows["width"], rows["height"],
+        clip_length=L, clip_stride=st["clip_offset"],
+        eval_clip_stride=clip_options.get("eval_clip_offset") or 0,
+        min_video_length=clip_options.get("min_video_length") or 0,
+        label_fraction=st["label_fraction"], benchmark=st["benchmark"],
+        val_frac=float(st["val_frac"]), test_frac=float(st["test_frac"]), seed=st["seed"],
+        balance=st["balance"])
+    clips = {s: int(len(plan[s]["first"])) for s in ("train", "val", "test")}
+    if sum(clips.values()) == 0:
+        reasons = "; ".join(f"{r}" for _, r in plan["skipped"][:3])
+        raise BadInput(f"{det.source}: no clip of {L} frames could be cut ({reasons}); "
+                       "nothing written")
+    names = dict(videos=videos, tracks=tracks)
+    report = dict(rows=int(len(order)), tracks=len(runs) - len(short), clips=clips,
+                  class_counts={}, skipped=skipped + [
+                      f"video {videos[rows['video'][plan['recording_rows'][r][0]]]!r} track "
+                      f"{tracks[rows['track'][plan['recording_rows'][r][0]]]!r}: {why}"
+                      for r, why in plan["skipped"]],
+                  clips_rejected_out_of_image=int(plan["clips_rejected_out_of_image"]),
+                  joints_at_origin=int(at_origin.sum()),
+                  joints=[n for n, p in zip(CARLA.joints, m.present) if p],
+                  settings=dict(st, source=det.source, source_joints=det.joints,
+                                threshold=float(threshold), derive=bool(derive),
+                                labels="csv" if labels is not None else "none"))
+    with atomic_output(out, force=force) as tmp:
+        _write(tmp, plan, rows, names, st, report, m)
+    report["output"] = str(out)
+    report["warnings"] = [f"the {s} split is empty" for s, n in clips.items() if n == 0]
+    return report
+
+
+def _split_arrays(plan: dict, split: str, rows: dict, L: int) -> dict:
+    p = plan[split]
+    rec_rows = plan["recording_rows"]
+    idx = np.array([[rec_rows[r][f + k] for k in range(L)]
+                    for r, f in zip(p["recording"], p["first"])], np.int64).reshape(-1, L)
+    uv, vis = rows["uv"][idx], rows["visible"][idx]
+    lo = np.where(vis[..., None], uv, np.inf).min(-2)
+    hi = np.where(vis[..., None], uv, -np.inf).max(-2)
+    none = ~vis.any(-1)
+    lo[none], hi[none] = 0, 0
+    return dict(idx=idx, uv=uv, visible=vis, confidence=rows["confidence"][idx],
+                bboxes=np.stack([lo, hi], -2).astype(np.float32),
+                is_crossing=rows["crossing"][idx], frames=rows["frame"][idx],
+                labels=np.asarray(p["label"], np.uint8), clip_id=np.asarray(p["index"], np.int32),
+                segment=np.asarray(p["segment"], np.int32))
+
+
+def _write(path, plan: dict, rows: dict, names: dict, st: dict, report: dict, m) -> None:
+    import h5py
+
+    L = st["clip_length"]
+    text = h5py.string_dtype()
+    with h5py.File(path, "w") as f:
+        for split in ("train", "val", "test"):
+            a = _split_arrays(plan, split, rows, L)
+            first = a["idx"][:, 0] if len(a["idx"]) else np.zeros(0, np.int64)
+            g = f.create_group(split)
+            g["projection_2d"] = a["uv"].astype(np.float32)
+            g["visible"] = a["visible"].astype(np.uint8)
+            g["confidence"] = a["confidence"]
+            g["labels"] = a["labels"]
+            g["targets/bboxes"] = a["bboxes"]
+            g["targets/is_crossing"] = a["is_crossing"].astype(np.uint8)
+            g["targets/frame_idx"] = a["frames"].astype(np.int64)
+            meta = dict(video_id=[names["videos"][v] for v in rows["video"][first]],
+                        pedestrian_id=[names["tracks"][t] for t in rows["track"][first]])
+            for k in _STR_META:
+                g.create_dataset(f"meta/{k}", data=meta.get(k, [""] * len(first)), dtype=text)
+            g["meta/clip_id"] = a["clip_id"]
+            g["meta/segment"] = a["segment"]
+            g["meta/start_frame"] = a["frames"][:, 0] if len(first) else np.zeros(0, np.int64)
+            g["meta/end_frame"] = (a["frames"][:, -1] + 1 if len(first)
+                                   else np.zeros(0, np.int64))
+            g["meta/clip_width"] = rows["width"][first].astype(np.int64)
+            g["meta/clip_height"] = rows["height"][first].astype(np.int64)
+            counts = np.bincount(a["labels"], minlength=2).astype(np.int64)
+            g.attrs["class_counts"] = counts
+            g.attrs["recordings"] = len(plan[split]["recordings"])
+            f.attrs[f"class_counts_{split}"] = counts
+            report["class_counts"][split] = counts.tolist()
+        rule = ("video" if st["benchmark"] else "last" if st["label_fraction"] == 0
+                else "any:%f" % st["label_fraction"])
+        attrs = dict(schema_version=1, created_by=f"bsp_fast {__version__}", clip_length=L,
+                     clip_stride=st["clip_offset"], eval_clip_stride=st["eval_clip_offset"],
+                     min_video_length=st["min_video_length"], label_rule=rule,
+                     benchmark=int(st["benchmark"]), val_frac=float(st["val_frac"]),
+                     test_frac=float(st["test_frac"]), seed=st["seed"],
+                     balance=int(st["balance"]), media=0, compression="none",
+                     class_labels=["not-crossing", "crossing"], joint_names=list(CARLA.joints),
+                     parents=np.asarray(CARLA.parents, np.int64),
+                     source_path=report["settings"]["source"],
+                     source_format=m.source.name, joints_mapped=m.present.astype(np.uint8),
+                     visibility_threshold=report["settings"]["threshold"],
+                     labels_source=report["settings"]["labels"],
+                     settings_json=json.dumps(report["settings"], sort_keys=True))
+        for k, v in attrs.items():
+            f.attrs[k] = v

@@ -1,0 +1,311 @@
+"""Readers of other tools' 2D pose files: COCO keypoint results / annotations JSON (MMPose,
+Detectron2, our exporter) and OpenPose's per-frame JSON, and the labels CSV.
+
+Each reader returns :class:`Detections`: one row per (video, track, frame) with the
+source joint set's points and confidences, the image size and where the row came from
+(``FILE record N`` / ``FILE``) for error messages. Bad input raises :class:`BadInput`
+naming the file, the record and the reason.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+
+import numpy as np
+
+from ..skeletons import joint_set
+
+__all__ = ["BadInput", "Detections", "read_coco", "read_openpose", "read_labels",
+           "load_json"]
+
+
+class BadInput(ValueError):
+    """An input file cannot be imported as it is (the message names file, record, reason)."""
+
+
+@dataclass
+class Detections:
+    """Rows of 2D poses: ``points (N, J, 2)`` and ``scores (N, J)`` (float64) in the joint
+    set ``joints``; ``video``, ``track`` (str lists), ``frame`` (int64), ``width``,
+    ``height`` (int64) and ``where`` (str list) per row."""
+
+    joints: str
+    video: list
+    track: list
+    frame: np.ndarray
+    points: np.ndarray
+    scores: np.ndarray
+    width: np.ndarray
+    height: np.ndarray
+    where: list
+    source: str
+
+
+def load_json(path):
+    """``json.load`` with a :class:`BadInput` naming the file, line and column."""
+    path = Path(path)
+    try:
+        with path.open("r", encoding="utf-8") as fh:
+            return json.load(fh)
+    except json.JSONDecodeError as exc:
+        raise BadInput(f"{path}: malformed JSON at line {exc.lineno} column {exc.colno}: "
+                       f"{exc.msg}; nothing written") from None
+    except UnicodeDecodeError as exc:
+        raise BadInput(f"{path}: not UTF-8 text ({exc.reason}); nothing written") from None
+
+
+def _numbers(values, count: int, what: str) -> np.ndarray:
+    if not isinstance(values, list) or len(values) != count:
+        n = len(values) if isinstance(values, list) else type(values).__name__
+        raise ValueError(f"{what} has {n} values, expected {count}")
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+        raise ValueError(f"{what} holds a value that is not a number")
+    a = np.asarray(values, np.float64)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{what} holds a non-finite number")
+    return a
+
+
+def _image_size(image_size) -> tuple | None:
+    if image_size is None:
+        return None
+    try:
+        w, h = (int(v) for v in image_size)
+    except (TypeError, ValueError):
+        raise ValueError(f"image_size must be (width, height) in pixels, got {image_size!r}") from None
+    if w <= 0 or h <= 0:
+        raise ValueError(f"image_size must be positive, got {image_size!r}")
+    return w, h
+
+
+_STEM_DIGITS = re.compile(r"(\d+)$")
+
+
+def _image_table(doc, path: Path, default_size) -> dict:
+    """image id -> (video, frame, width, height) from a COCO-style ``images`` list."""
+    images = doc.get("images") if isinstance(doc, dict) else None
+    if not isinstance(images, list):
+        raise BadInput(f"{path}: no 'images' list (a COCO-style file whose images give the "
+                       "video and frame of each image id)")
+    table = {}
+    for k, im in enumerate(images):
+        where = f"{path}: images[{k}]"
+        if not isinstance(im, dict) or "id" not in im:
+            raise BadInput(f"{where}: an image needs an 'id'")
+        name = PurePosixPath(str(im.get("file_name", "")))
+        video = im.get("video", im.get("vid_id", str(name.parent) if name.parent.name else None))
+        frame = im.get("frame")
+        if frame is None:
+            m = _STEM_DIGITS.search(name.stem)
+            frame = int(m.group(1)) if m else None
+        if not video or frame is None or not isinstance(frame, int) or frame < 0:
+            raise BadInput(f"{where} (id {im['id']!r}): cannot tell its video and frame: give "
+                           "'video' and 'frame', or a file_name like VIDEO/000042.jpg")
+        size = (im.get("width"), im.get("height"))
+        if size[0] is None or size[1] is None:
+            if default_size is None:
+                raise BadInput(f"{where} (id {im['id']!r}): no width/height; pass image_size "
+                               "(--image-size WxH)")
+            size = default_size
+        if im["id"] in table:
+            raise BadInput(f"{where}: image id {im['id']!r} appears twice")
+        table[im["id"]] = (str(video), int(frame), int(size[0]), int(size[1]))
+    return table
+
+
+def read_coco(path, images=None, image_size=None, tracks: str = "require",
+              joints="coco17") -> Detections:
+    """A COCO keypoint **results** file (a JSON list of ``{image_id, category_id,
+    keypoints: [x, y, score] * 17, score, track_id?}``, what MMPose and Detectron2 write)
+    or a COCO keypoint **annotations** file (a dict with ``images`` and ``annotations``;
+    ``v > 0`` counts as confidence 1, ``v = 0`` as 0).
+
+    ``images``: a COCO-style JSON whose ``images`` give each image id's video and frame
+    (keys ``video``/``vid_id`` and ``frame``, else the folder and the trailing digits of
+    ``file_name``) and size; an annotations file carries its own. ``image_size`` (W, H)
+    is used where an image has no width/height. ``tracks``: ``require`` (records without
+    ``track_id`` are allowed only where an image holds one detection: track ``"0"``) or
+    ``best`` (without track ids, keep the highest-scoring detection of each image).
+    ``joints``: the keypoints' joint set (COCO-17 unless the file follows another layout,
+    e.g. ``body25`` from our exporter)."""
+    if tracks not in ("require", "best"):
+        raise ValueError(f"tracks must be 'require' or 'best', got {tracks!r}")
+    path = Path(path)
+    size = _image_size(image_size)
+    doc = load_json(path)
+    if isinstance(doc, dict) and "annotations" in doc:
+        records, annotations = doc["annotations"], True
+        table = _image_table(load_json(images) if images else doc,
+                             Path(images) if images else path, size)
+    elif isinstance(doc, list):
+        records, annotations = doc, False
+        if images is None:
+            raise BadInput(f"{path}: a COCO results list names images by id only; pass the "
+                           "COCO-style JSON of those images (images=..., --images FILE)")
+        table = _image_table(load_json(images), Path(images), size)
+    else:
+        raise BadInput(f"{path}: expected a COCO results list or a COCO annotations dict "
+                       f"with 'annotations', got a JSON {type(doc).__name__}")
+    if not isinstance(records, list):
+        raise BadInput(f"{path}: 'annotations' must be a list")
+    jset = joint_set(joints)
+    J = len(jset)
+    rows = []
+    for k, rec in enumerate(records):
+        where = f"{path}: record {k}"
+        try:
+            if not isinstance(rec, dict):
+                raise ValueError("not a JSON object")
+            for key in ("image_id", "keypoints"):
+                if key not in rec:
+                    raise ValueError(f"no {key!r}")
+            if rec.get("category_id", 1) != 1:
+                raise ValueError(f"category_id {rec['category_id']!r} is not 1 (person)")
+            kp = _numbers(rec["keypoints"], 3 * J, f"keypoints ({jset.name})").reshape(J, 3)
+            if rec["image_id"] not in table:
+                raise ValueError(f"image_id {rec['image_id']!r} is not in the images list")
+            score = float(rec.get("score", 1.0)) if not annotations else 1.0
+        except (ValueError, TypeError) as exc:
+            raise BadInput(f"{where}: {exc}") from None
+        conf = (kp[:, 2] > 0).astype(np.float64) if annotations else kp[:, 2]
+        track = rec.get("track_id")
+        rows.append((rec["image_id"], None if track is None else str(track), kp[:, :2], conf,
+                     score, f"{where} (image_id {rec['image_id']!r})"))
+    rows = _assign_untracked(rows, tracks, path)
+    out = [(*table[r[0]][:2], r[1], r[2], r[3], *table[r[0]][2:], r[5]) for r in rows]
+    return _detections(jset.name, out, str(path))
+
+
+def _assign_untracked(rows: list, tracks: str, path: Path) -> list:
+    """Rows without a track id: track ``"0"`` where alone in their image, or the best."""
+    by_image: dict = {}
+    for r in rows:
+        if r[1] is None:
+            by_image.setdefault(r[0], []).append(r)
+    keep = []
+    for r in rows:
+        if r[1] is not None:
+            keep.append(r)
+            continue
+        group = by_image[r[0]]
+        if len(group) > 1 and tracks == "require":
+            raise BadInput(f"{r[5]}: image holds {len(group)} detections without track_id; "
+                           "run a tracker first (a 'track_id' per record), or keep the "
+                           "best-scoring one per image (tracks='best', --tracks best)")
+        if r is max(group, key=lambda g: g[4]):
+            keep.append((r[0], "0") + r[2:])
+    return keep
+
+
+_OPENPOSE_NAME = re.compile(r"^(?P<video>.+)_(?P<frame>\d+)_keypoints\.json$")
+
+
+def read_openpose(folder, image_size, tracks: str = "require") -> Detections:
+    """OpenPose ``--write_json`` output: files ``VIDEO_<frame>_keypoints.json`` in
+    ``folder`` (searched recursively), each ``{"people": [{"person_id": [id],
+    "pose_keypoints_2d": [x, y, c] * 25}, ...]}`` (BODY_25). Tracks are the
+    ``person_id`` (OpenPose's ``--tracking``); an untracked person (``-1``) is track
+    ``"0"`` when alone in the frame (or the best-scoring one with ``tracks='best'``).
+    ``image_size`` (W, H): OpenPose files do not record it."""
+    if tracks not in ("require", "best"):
+        raise ValueError(f"tracks must be 'require' or 'best', got {tracks!r}")
+    size = _image_size(image_size)
+    if size is None:
+        raise ValueError("image_size (W, H) is needed: OpenPose JSON does not record it")
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise BadInput(f"{folder}: not a folder of OpenPose *_keypoints.json files")
+    files = sorted(folder.rglob("*_keypoints.json"))
+    if not files:
+        raise BadInput(f"{folder}: no *_keypoints.json file in it")
+    J = len(joint_set("body25"))
+    rows = []
+    for path in files:
+        m = _OPENPOSE_NAME.match(path.name)
+        if m is None:
+            raise BadInput(f"{path}: name is not VIDEO_<frame>_keypoints.json")
+        doc = load_json(path)
+        people = doc.get("people") if isinstance(doc, dict) else None
+        if not isinstance(people, list):
+            raise BadInput(f"{path}: no 'people' list")
+        image = (m.group("video"), int(m.group("frame")))
+        for k, person in enumerate(people):
+            where = f"{path}: people[{k}]"
+            try:
+                if not isinstance(person, dict):
+                    raise ValueError("not a JSON object")
+                kp = _numbers(person.get("pose_keypoints_2d"), 3 * J,
+                              "pose_keypoints_2d").reshape(J, 3)
+            except ValueError as exc:
+                raise BadInput(f"{where}: {exc}") from None
+            pid = person.get("person_id", [-1])
+            pid = pid[0] if isinstance(pid, list) and pid else pid
+            track = None if pid in (-1, None) else str(pid)
+            rows.append((image, track, kp[:, :2], kp[:, 2], float(kp[:, 2].mean()), where))
+    rows = _assign_untracked(rows, tracks, folder)
+    out = [(r[0][0], r[0][1], r[1], r[2], r[3], size[0], size[1], r[5]) for r in rows]
+    return _detections("body25", out, str(folder))
+
+
+def _detections(joints: str, rows: list, source: str) -> Detections:
+    """Rows ``(video, frame, track, points, scores, W, H, where)``; duplicates refused."""
+    seen = {}
+    for r in rows:
+        key = (r[0], r[2], r[1])
+        if key in seen:
+            raise BadInput(f"{r[7]}: video {r[0]!r} track {r[2]!r} frame {r[1]} appears twice "
+                           f"(also {seen[key]})")
+        seen[key] = r[7]
+    J = len(joint_set(joints))
+    return Detections(
+        joints=joints, video=[r[0] for r in rows], track=[r[2] for r in rows],
+        frame=np.array([r[1] for r in rows], np.int64),
+        points=np.array([r[3] for r in rows], np.float64).reshape(-1, J, 2),
+        scores=np.array([r[4] for r in rows], np.float64).reshape(-1, J),
+        width=np.array([r[5] for r in rows], np.int64),
+        height=np.array([r[6] for r in rows], np.int64),
+        where=[r[7] for r in rows], source=source)
+
+
+LABEL_COLUMNS = ("video", "track", "frame", "crossing")
+
+
+def read_labels(path) -> dict:
+    """The labels CSV (header ``video,track,frame,crossing``; crossing 0 or 1) as
+    ``{(video, track, frame): crossing}``; BadInput names the line."""
+    path = Path(path)
+    out: dict = {}
+    try:
+        with path.open("r", encoding="utf-8", newline="") as fh:
+            reader = csv.reader(fh)
+            header = [h.strip() for h in next(reader, [])]
+            missing = [c for c in LABEL_COLUMNS if c not in header]
+            if missing:
+                raise BadInput(f"{path}: line 1: header lacks {missing}; expected columns "
+                               f"{','.join(LABEL_COLUMNS)}")
+            col = {c: header.index(c) for c in LABEL_COLUMNS}
+            for line, row in enumerate(reader, start=2):
+                if not row or all(not c.strip() for c in row):
+                    continue
+                try:
+                    video, track = row[col["video"]].strip(), row[col["track"]].strip()
+                    frame = int(row[col["frame"]])
+                    crossing = int(row[col["crossing"]])
+                except (IndexError, ValueError):
+                    raise BadInput(f"{path}: line {line}: expected video,track,frame (integer),"
+                                   f"crossing (0 or 1), got {row!r}") from None
+                if crossing not in (0, 1) or frame < 0 or not video or not track:
+                    raise BadInput(f"{path}: line {line}: crossing must be 0 or 1 and frame "
+                                   f">= 0, got {row!r}")
+                key = (video, track, frame)
+                if key in out:
+                    raise BadInput(f"{path}: line {line}: video {video!r} track {track!r} frame "
+                                   f"{frame} labelled twice")
+                out[key] = crossing
+    except UnicodeDecodeError as exc:
+        raise BadInput(f"{path}: not UTF-8 text ({exc.reason})") from None
+    return out
+
