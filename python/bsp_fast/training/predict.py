@@ -82,14 +82,14 @@ def _writer(out: Path, force: bool, attrs: dict):
     return H5PredictionWriter()
 
 
-def _progress_bar(split: str):
+def _progress_bar():
     """Lightning's progress bar on stderr (stdout keeps only the summary line)."""
     from lightning.pytorch.callbacks import TQDMProgressBar
     from lightning.pytorch.callbacks.progress.tqdm_progress import Tqdm
 
     class StderrBar(TQDMProgressBar):
         def init_predict_tqdm(self):
-            return Tqdm(desc=f"predicting {split}", position=2 * self.process_position,
+            return Tqdm(desc=self.predict_description, position=2 * self.process_position,
                         leave=True, dynamic_ncols=True, file=sys.stderr, smoothing=0,
                         bar_format=self.BAR_FORMAT)
 
@@ -103,6 +103,8 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
     """Writes the predictions of run directory or checkpoint ``run`` for ``split`` of its
     data (or ``data``) to the HDF5 file ``out`` (temporary name, renamed when complete;
     an existing file needs ``force``)."""
+    import warnings
+
     import torch
 
     from .evaluate import SPLIT_STAGES, load_run
@@ -135,7 +137,9 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
     # float32 like training's default; the whole split, whatever the run's --limit-batches
     trainer = make_trainer(dict(cfg, accelerator=accelerator, quiet=not progress,
                                 limit_batches=0), None, "32", fit=False,
-                           callbacks=[writer] + ([_progress_bar(split)] if progress else []))
+                           callbacks=[writer] + ([_progress_bar()] if progress else []))
+    # the writer needs no sampler indices (the clips carry their row)
+    warnings.filterwarnings("ignore", message=r".*infer the batch indices.*")
     trainer.predict(module, dataloaders=loader, return_predictions=False)
     n = int(sum(len(v) for v in writer.parts["label"]))
     return PredictResult(path=out, task=task, model=module.hparams["model"], split=split,
