@@ -68,7 +68,7 @@ def fixture(work: str, clips: int, L: int, media: bool) -> str:
 
 # ----------------------------------------------------------------------------- speed
 def time_training(model, loader, steps: int, warmup: int, bf16: bool) -> dict:
-    opt, _, _ = model.configure_optimizers()
+    opt = model.configure_optimizers()["optimizer"]
     model.train()
     it = iter(loader)
     wait = comp = 0.0
@@ -228,7 +228,7 @@ def fit_section(args, work: str) -> None:
         for p in ("fp32", "bf16"):
             torch.manual_seed(0)
             model = models.create(task, name)
-            opt, _, _ = model.configure_optimizers(lr=lr)
+            opt = model.configure_optimizers(lr=lr)["optimizer"]
             model.train()
             for s in range(args.fit_steps):
                 b = data[s % len(data)]

@@ -91,7 +91,7 @@ def main(argv=None) -> int:
     for head in ("regression", "heatmap"):
         torch.manual_seed(args.seed)
         model = models.create("pose_estimation", "pose_cnn", width=args.width, head=head)
-        opt, _, _ = model.configure_optimizers(lr=args.lr)
+        opt = model.configure_optimizers(lr=args.lr)["optimizer"]
         t0 = time.perf_counter()
         model.train()
         for idx, t in plan:

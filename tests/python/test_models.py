@@ -297,15 +297,24 @@ def test_configure_optimizers_report_defaults():
              ("lifting", "poseformer"): (4e-4, 0.1, "ExponentialLR")}
     for (task, name), (lr, wd, sched) in cases.items():
         m = models.create(task, name, **SMALL.get(name, {}))
-        opt, s, interval = m.configure_optimizers()
-        assert isinstance(opt, torch.optim.AdamW) and interval == "epoch"
+        conf = m.configure_optimizers()  # Lightning's own format
+        opt = conf["optimizer"]
+        assert isinstance(opt, torch.optim.AdamW)
         assert opt.param_groups[0]["lr"] == lr and opt.param_groups[0]["weight_decay"] == wd
-        assert (None if s is None else type(s).__name__) == sched
-    opt, s, _ = models.create("autoencoder", "simple_transformer",
-                              dim_feedforward=8).configure_optimizers(lr=0.5)
-    assert opt.param_groups[0]["lr"] == 0.5 and s.T_0 == 30 and s.eta_min == 1e-8
+        if sched is None:
+            assert set(conf) == {"optimizer"}
+        else:
+            assert set(conf) == {"optimizer", "lr_scheduler"}
+            assert set(conf["lr_scheduler"]) == {"scheduler", "interval"}
+            assert conf["lr_scheduler"]["interval"] == "epoch"
+            assert type(conf["lr_scheduler"]["scheduler"]).__name__ == sched
+            assert conf["lr_scheduler"]["scheduler"].optimizer is opt
+    conf = models.create("autoencoder", "simple_transformer",
+                         dim_feedforward=8).configure_optimizers(lr=0.5)
+    s = conf["lr_scheduler"]["scheduler"]
+    assert conf["optimizer"].param_groups[0]["lr"] == 0.5 and s.T_0 == 30 and s.eta_min == 1e-8
     assert models.create("lifting", "poseformer", **SMALL["poseformer"]) \
-        .configure_optimizers()[1].gamma == 0.99
+        .configure_optimizers()["lr_scheduler"]["scheduler"].gamma == 0.99
 
 
 def test_trivial_baselines():

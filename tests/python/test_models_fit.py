@@ -51,7 +51,7 @@ def mean_loss(model, data) -> float:
 
 
 def fit(model, data, steps, lr):
-    opt, _, _ = model.configure_optimizers(lr=lr)
+    opt = model.configure_optimizers(lr=lr)["optimizer"]
     model.train()
     for step in range(steps):
         b = data[step % len(data)]

@@ -5,7 +5,7 @@
 >>> model = models.create("lifting", "poseformer", receptive_field=9)
 >>> out = model.forward_batch(batch)       # a ClipDataset batch dict
 >>> loss = model.loss(out, batch)
->>> opt, sched, interval = model.configure_optimizers()
+>>> model.configure_optimizers()  # {"optimizer": AdamW, "lr_scheduler": {...}}
 
 See docs/models.md for architectures, defaults, parameter counts and speed.
 """

@@ -129,12 +129,17 @@ class BaseModel(nn.Module):
         """``(scheduler, "epoch" | "step")`` or ``(None, "epoch")``."""
         return None, "epoch"
 
-    def configure_optimizers(self, lr: float | None = None):
-        """``(optimizer, scheduler or None, interval)`` with the report's defaults."""
+    def configure_optimizers(self, lr: float | None = None) -> dict:
+        """The report's defaults in Lightning's format: ``{"optimizer": AdamW}``, plus
+        ``"lr_scheduler": {"scheduler": ..., "interval": "epoch" | "step"}`` when the
+        model has a scheduler (a ``LightningModule.configure_optimizers`` can return it
+        as is)."""
         opt = torch.optim.AdamW(self.parameters(), lr=self.default_lr if lr is None else lr,
                                 weight_decay=self.default_weight_decay)
         sched, interval = self.scheduler(opt)
-        return opt, sched, interval
+        if sched is None:
+            return {"optimizer": opt}
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "interval": interval}}
 
     def init_from_baseline(self, baseline) -> None:
         """Starts the model from its task's fitted trivial baseline where that helps (called

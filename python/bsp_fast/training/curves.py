@@ -1,4 +1,9 @@
-"""``curves.png``: loss and the task's main metrics per epoch, from a run's CSV logs."""
+"""``curves.png``: loss and the task's main metrics per epoch, from a run's CSV logs.
+
+The metrics drawn are the task object's ``curves``, in the unit of the tables (PCK in %,
+errors in mm); a dotted line marks the best epoch (the checkpoint that was tested) and the
+epoch axis has whole-number ticks.
+"""
 from __future__ import annotations
 
 import csv
@@ -6,16 +11,9 @@ import math
 import re
 from pathlib import Path
 
-__all__ = ["read_logs", "plot_curves", "MAIN_METRICS"]
+from .tasks import get_task
 
-#: The metrics drawn (and tabulated) per task, with their labels.
-MAIN_METRICS = {
-    "classification": (("f1", "F1"), ("precision", "precision"), ("recall", "recall")),
-    "autoencoder": (("pck_0.05", "PCK@0.05"), ("pckhn_0.1", "PCKhn@0.1")),
-    "lifting": (("mpjpe_mm", "MPJPE (mm)"), ("n_mpjpe_mm", "N-MPJPE (mm)"),
-                ("pa_mpjpe_mm", "PA-MPJPE (mm)"), ("mpjve_mm", "MPJVE (mm)")),
-    "pose_estimation": (("pck_0.05", "PCK@0.05"), ("pckhn_0.1", "PCKhn@0.1")),
-}
+__all__ = ["read_logs", "plot_curves", "curves_figure", "best_epoch_of"]
 
 
 def _version(path: Path) -> int:
@@ -46,21 +44,29 @@ def read_logs(run_dir) -> dict:
     return out
 
 
-def plot_curves(run_dir, task: str, out_path=None, initial: dict | None = None,
-                title: str | None = None) -> Path | None:
-    """Draws train/val loss and the task's val metrics per epoch (dashed: the initial
-    metrics of the trivial baseline on val). Returns the PNG path, or None when nothing
-    was logged per epoch."""
-    logs = read_logs(run_dir)
-    if not any(k.startswith(("train/", "val/")) for k in logs):
-        return None
+def best_epoch_of(logs: dict) -> int | None:
+    """1-based epoch of the lowest logged val loss (what the best checkpoint monitors)."""
+    val = {e: v for e, v in logs.get("val/loss", {}).items() if math.isfinite(v)}
+    return min(val, key=val.get) + 1 if val else None
+
+
+def curves_figure(logs: dict, task: str, initial: dict | None = None,
+                  title: str | None = None, best_epoch: int | None = None):
+    """The matplotlib figure of :func:`plot_curves` from :func:`read_logs`' ``logs``:
+    train/val loss, and the task's val metrics in the tables' units (dashed: the trivial
+    baseline's ``initial`` val metrics; dotted: ``best_epoch``, 1-based, by default the
+    epoch of the lowest val loss)."""
     from .._extras import require
+
 
     matplotlib = require("matplotlib", "bsp-train (curves.png)", extra="torch")
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
-    metrics = [(k, label) for k, label in MAIN_METRICS[task] if f"val/{k}" in logs]
+    spec = get_task(task)
+    metrics = [spec.metric(k) for k in spec.curves if f"val/{k}" in logs]
+    best = best_epoch_of(logs) if best_epoch is None else best_epoch
     fig, axes = plt.subplots(1, 1 + bool(metrics), figsize=(11 if metrics else 6, 4),
                              squeeze=False)
     ax = axes[0, 0]
@@ -72,30 +78,50 @@ def plot_curves(run_dir, task: str, out_path=None, initial: dict | None = None,
     base = (initial or {}).get("loss")
     if base is not None and math.isfinite(base):
         ax.axhline(base, ls="--", c="grey", lw=1, label="initial (val)")
-    ax.set_xlabel("epoch")
     ax.set_ylabel("loss")
     ax.set_yscale("log" if _positive(logs, ("train/loss", "val/loss")) else "linear")
-    ax.grid(alpha=0.3)
-    ax.legend()
     if metrics:
-        ax = axes[0, 1]
-        for i, (key, label) in enumerate(metrics):
-            series = logs[f"val/{key}"]
+        mx = axes[0, 1]
+        for m in metrics:
+            series = logs[f"val/{m.key}"]
             epochs = sorted(series)
-            line, = ax.plot([e + 1 for e in epochs], [series[e] for e in epochs], marker=".",
-                            label=f"val {label}")
-            base = (initial or {}).get(key)
+            line, = mx.plot([e + 1 for e in epochs], [m.display(series[e]) for e in epochs],
+                            marker=".", label=f"val {m.header}")
+            base = (initial or {}).get(m.key)
             if base is not None and math.isfinite(base):
-                ax.axhline(base, ls="--", lw=1, c=line.get_color())
-        ax.set_xlabel("epoch")
-        ax.set_ylabel("mm" if task == "lifting" else "")
-        ax.grid(alpha=0.3)
-        ax.legend(title="dashed: initial metrics" if initial else None)
+                mx.axhline(m.display(base), ls="--", lw=1, c=line.get_color())
+        units = {m.display_unit for m in metrics}
+        mx.set_ylabel(units.pop() if len(units) == 1 else "")
+    for i, a in enumerate(axes[0]):
+        if best is not None:
+            a.axvline(best, ls=":", c="black", lw=1,
+                      label=f"best epoch ({best})" if i == 0 else None)
+        a.set_xlabel("epoch")
+        a.xaxis.set_major_locator(MaxNLocator(integer=True))
+        a.grid(alpha=0.3)
+        a.legend(title="dashed: initial metrics" if i and initial else None)
     if title:
         fig.suptitle(title)
     fig.tight_layout()
+    return fig
+
+
+def plot_curves(run_dir, task: str, out_path=None, initial: dict | None = None,
+                title: str | None = None, best_epoch: int | None = None) -> Path | None:
+    """Draws :func:`curves_figure` of a run directory's logs to ``out_path`` (default
+    ``RUN_DIR/curves.png``). Returns the PNG path, or None when nothing was logged per
+    epoch."""
+    logs = read_logs(run_dir)
+    if not any(k.startswith(("train/", "val/")) for k in logs):
+        return None
+    import matplotlib.pyplot as plt
+
+    from ..atomic import atomic_output
+
+    fig = curves_figure(logs, task, initial, title, best_epoch)
     out = Path(out_path) if out_path is not None else Path(run_dir) / "curves.png"
-    fig.savefig(out, dpi=100)
+    with atomic_output(out, force=True) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)
     return out
 

@@ -6,6 +6,9 @@ Written datasets (N clips, L' = the frames the model predicts, see ``frame_start
 
 * every task: ``clip_id``, ``row`` (row in the source split), ``start_frame``, ``label``,
   ``frames (N, L')``, ``video_id``, ``pedestrian_id``, ``age``, ``gender`` (strings);
+  what each task adds is its task object's ``predictions`` (``bsp_fast.training.tasks``),
+  returned by the LightningModule's ``predict_step`` and written by Lightning's
+  ``trainer.predict`` through a ``BasePredictionWriter``:
 * classification: ``logits``, ``probability`` (of crossing), ``prediction`` (0/1);
 * autoencoder: ``pixels (N, L', 26, 2)`` de-normalised with the *input's* hips/neck
   normalisation (no ground truth used), ``normalised`` (raw output), ``input_pixels``
@@ -44,48 +47,53 @@ class PredictResult:
 
 
 def _np(t):
+    if isinstance(t, list):
+        return t
     return t.detach().float().cpu().numpy() if t.is_floating_point() else t.detach().cpu().numpy()
 
 
-def _outputs(task: str, out, batch: dict, net) -> dict:
-    """The arrays of one batch (see the module docstring)."""
-    import torch
+def _writer(out: Path, force: bool, attrs: dict):
+    """Lightning's ``BasePredictionWriter`` that gathers ``predict_step``'s arrays batch
+    by batch and writes them to ``out`` at the end (temporary name, then renamed)."""
+    import h5py
+    from lightning.pytorch.callbacks import BasePredictionWriter
 
-    from .scoring import hips_neck_lengths
+    class H5PredictionWriter(BasePredictionWriter):
+        def __init__(self):
+            super().__init__(write_interval="batch")
+            self.parts: dict = {}
 
-    out = out.detach().float()
-    res = {}
-    if task == "classification":
-        prob = torch.sigmoid(out) if out.ndim == 1 else torch.softmax(out, -1)[:, 1]
-        res.update(logits=_np(out), probability=_np(prob), prediction=_np((prob >= 0.5).to(torch.int8)))
-        return res
-    L = batch["targets"].shape[1] if "targets" in batch else batch["inputs"].shape[1]
-    sl = net.frame_slice(L)
-    if task == "autoencoder":
-        scale, shift = batch["scale"][:, sl, None, None], batch["shift"][:, sl, None, :]
-        vis = batch["visible"][:, sl, :, None]
-        tscale = batch["target_scale"][:, sl, None, None]
-        tshift = batch["target_shift"][:, sl, None, :]
-        res.update(pixels=_np(out * scale + shift), normalised=_np(out),
-                   input_pixels=_np(torch.where(vis, batch["inputs"][:, sl] * scale + shift, 0.0)),
-                   target_pixels=_np(batch["targets"][:, sl] * tscale + tshift))
-    elif task == "lifting":
-        from .. import metrics as M
+        def write_on_batch_end(self, trainer, pl_module, prediction, batch_indices, batch,
+                               batch_idx, dataloader_idx=0):
+            for k, v in prediction.items():
+                self.parts.setdefault(k, []).append(_np(v))
 
-        hn = hips_neck_lengths(batch["meta"], device=out.device)
-        gt = batch["targets_m"][:, sl].float()
-        res.update(metres=_np(out * hn[:, None, None, None]), normalised=_np(out),
-                   metres_aligned=_np(M.denormalise_lifting(out, gt, hn)), target_metres=_np(gt))
-    else:  # pose_estimation: crop pixels -> image pixels through each frame's crop box
-        box = batch["crop_box"][:, sl].float()
-        S = batch["inputs"].shape[-1]
-        size = torch.stack([box[..., 2] - box[..., 0], box[..., 3] - box[..., 1]], -1)
-        pixels = out * (size / S)[..., None, :] + box[..., None, :2]
-        res.update(crop_pixels=_np(out), pixels=_np(pixels),
-                   target_crop_pixels=_np(batch["targets"][:, sl]),
-                   visible=_np(batch["visible"][:, sl]))
-    res["frames"] = _np(batch["meta"]["frames"][:, sl])
-    return res
+        def on_predict_epoch_end(self, trainer, pl_module):
+            out.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_output(out, force=force) as tmp, h5py.File(tmp, "w") as f:
+                for k, v in self.parts.items():
+                    if isinstance(v[0], list):  # per-clip strings
+                        data = np.array(sum(v, []), dtype=h5py.string_dtype())
+                    else:
+                        data = np.concatenate(v)
+                    f.create_dataset(k, data=data)
+                f.attrs.update(attrs)
+
+    return H5PredictionWriter()
+
+
+def _progress_bar():
+    """Lightning's progress bar on stderr (stdout keeps only the summary line)."""
+    from lightning.pytorch.callbacks import TQDMProgressBar
+    from lightning.pytorch.callbacks.progress.tqdm_progress import Tqdm
+
+    class StderrBar(TQDMProgressBar):
+        def init_predict_tqdm(self):
+            return Tqdm(desc=self.predict_description, position=2 * self.process_position,
+                        leave=True, dynamic_ncols=True, file=sys.stderr, smoothing=0,
+                        bar_format=self.BAR_FORMAT)
+
+    return StderrBar()
 
 
 def predict(run, out, data=None, *, split: str = "test", which: str = "best",
@@ -95,71 +103,47 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
     """Writes the predictions of run directory or checkpoint ``run`` for ``split`` of its
     data (or ``data``) to the HDF5 file ``out`` (temporary name, renamed when complete;
     an existing file needs ``force``)."""
-    import h5py
+    import warnings
+
     import torch
 
     from .evaluate import SPLIT_STAGES, load_run
-    from .train import make_datamodule, prepare_data
+    from .train import make_datamodule, make_trainer, prepare_data
 
     if split not in SPLIT_STAGES:
         raise ValueError(f"split must be one of {list(SPLIT_STAGES)}, got {split!r}")
+    if accelerator not in C.ACCELERATORS:
+        raise ValueError(f"accelerator must be one of {list(C.ACCELERATORS)}, got "
+                         f"{accelerator!r}")
     out = Path(out)
     if out.exists() and not force:
         raise RunError(f"{out} exists; pass --force to overwrite it", code=3)
+    if accelerator == "gpu" and not torch.cuda.is_available():
+        raise C.ConfigError("--accelerator gpu: no CUDA device available")
     module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size,
                                      workers=workers, noise=noise, mjp=mjp)
     dm = make_datamodule(cfg, h5)
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
     loader = dm.test_dataloader() if split == "test" else dm.val_dataloader()
-    device = torch.device("cuda" if accelerator in ("auto", "gpu") and torch.cuda.is_available()
-                          else "cpu")
-    if accelerator == "gpu" and device.type != "cuda":
-        raise C.ConfigError("--accelerator gpu: no CUDA device available")
-    module.to(device)
-    net, task = module.net, module.task
-    parts: dict = {}
-    strings: dict = {k: [] for k in ("video_id", "pedestrian_id", "age", "gender")}
-    if progress:
-        from tqdm import tqdm
-
-        loader = tqdm(loader, desc=f"predicting {split}", unit="batch", file=sys.stderr)
-    with torch.no_grad():
-        for batch in loader:
-            batch = _to(batch, device)
-            arrays = _outputs(task, net.forward_batch(batch), batch, net)
-            meta = batch["meta"]
-            arrays.update(clip_id=_np(meta["clip_id"]), row=_np(meta["row"]),
-                          start_frame=_np(meta["start_frame"]), label=_np(batch["label"]))
-            for k, v in arrays.items():
-                parts.setdefault(k, []).append(v)
-            for k in strings:
-                strings[k] += list(meta[k])
     L = dm.datasets[split].clip_length
-    sl = net.frame_slice(L)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_output(out, force=force) as tmp:
-        with h5py.File(tmp, "w") as f:
-            for k, v in parts.items():
-                f.create_dataset(k, data=np.concatenate(v))
-            for k, v in strings.items():
-                f.create_dataset(k, data=np.array(v, dtype=h5py.string_dtype()))
-            f.attrs.update({"created_by": "bsp-predict", "task": task,
-                            "model": module.hparams["model"], "checkpoint": str(ckpt),
-                            "source": str(dm.h5_path), "split": split,
-                            "frame_start": sl.start or 0, "frame_stop": sl.stop or L,
-                            "clip_length": L,
-                            "hparams_json": json.dumps(module.hparams["hparams"], default=str),
-                            "units": "metres" if task == "lifting" else "pixels"})
-    n = int(sum(len(v) for v in parts["label"]))
+    sl = module.scored_frames(L)
+    task = module.task
+    attrs = {"created_by": "bsp-predict", "task": task, "model": module.hparams["model"],
+             "checkpoint": str(ckpt), "source": str(dm.h5_path), "split": split,
+             "frame_start": sl.start or 0, "frame_stop": sl.stop or L, "clip_length": L,
+             "hparams_json": json.dumps(module.hparams["hparams"], default=str),
+             "units": module.spec.prediction_units}
+    writer = _writer(out, force, attrs)
+    # float32 like training's default; the whole split, whatever the run's --limit-batches
+    trainer = make_trainer(dict(cfg, accelerator=accelerator, quiet=not progress,
+                                limit_batches=0), None, "32", fit=False,
+                           callbacks=[writer] + ([_progress_bar()] if progress else []))
+    # the writer needs no sampler indices (the clips carry their row)
+    warnings.filterwarnings("ignore", message=r".*infer the batch indices.*")
+    trainer.predict(module, dataloaders=loader, return_predictions=False)
+    n = int(sum(len(v) for v in writer.parts["label"]))
     return PredictResult(path=out, task=task, model=module.hparams["model"], split=split,
-                         clips=n, datasets=sorted(list(parts) + list(strings)))
-
-
-def _to(batch: dict, device):
-    if device.type == "cpu":
-        return batch
-    return {k: (_to(v, device) if isinstance(v, dict) else
-                v.to(device) if hasattr(v, "to") else v) for k, v in batch.items()}
+                         clips=n, datasets=sorted(writer.parts))
 
 
 def main(argv=None) -> int:

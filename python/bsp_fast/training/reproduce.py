@@ -20,6 +20,8 @@ from pathlib import Path
 from . import config as C
 from ..atomic import write_text
 from .runs import RunError, read_run
+from .tasks import get_task
+from .tasks.classification import constant_f1
 
 __all__ = ["TABLES", "BUDGETS", "load_table", "row_options", "reproduce", "evaluate_findings",
            "format_report", "main"]
@@ -72,6 +74,10 @@ def load_table(table) -> dict:
     for key in ("table", "task", "metrics", "common", "budgets", "rows", "findings"):
         if not isinstance(doc, dict) or key not in doc:
             raise ValueError(f"{path}: missing key {key!r}")
+    try:
+        task = get_task(doc["task"])
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
     names = [r["name"] for r in doc["rows"]]
     for r in doc["rows"]:
         extra = r.get("budgets") or {}
@@ -88,6 +94,9 @@ def load_table(table) -> dict:
         for name in _rows_of(f):
             if name not in names:
                 raise ValueError(f"{path}: finding {f.get('text')!r} names unknown row {name!r}")
+        if f.get("baseline") is not None and f["baseline"] not in task.finding_baselines:
+            raise ValueError(f"{path}: finding {f.get('text')!r}: baseline {f['baseline']!r}; "
+                             f"allowed for {task.name}: {list(task.finding_baselines)}")
         if f.get("metric") not in doc["metrics"]:
             raise ValueError(f"{path}: finding {f.get('text')!r}: metric {f.get('metric')!r} "
                              f"is not one of {list(doc['metrics'])}")
@@ -253,7 +262,7 @@ def _finding(tab, f, values: dict, initial: dict) -> tuple:
         elif k == "fails":
             r = f["row"]
             ok = v[r] <= initial[r] + f.get("margin", 0.0)
-            what = "best constant" if f.get("baseline") == "constant" else "majority class"
+            what = _baseline(tab, f)[0]
             text = f"{fm(v[r])} vs {what} {fm(initial[r])}"
         else:  # beats_initial
             ok = all(sign * (v[r] - initial[r]) > 0 for r in f["rows"])
@@ -267,16 +276,13 @@ def _finding(tab, f, values: dict, initial: dict) -> tuple:
     return ours or "rows not run", report, status
 
 
-def constant_f1(initial: dict):
-    """F1 of the better constant classifier on a split, from the majority-class baseline's
-    metrics there: always "crossing" scores 2p / (1 + p) with p the crossing share, which
-    is at least the majority class's F1 (0 when the majority does not cross). A classifier
-    that only learnt to say "crossing" reaches this without looking at the poses."""
-    acc, f1 = initial.get("accuracy"), initial.get("f1")
-    if acc is None or f1 is None:
-        return None
-    p = acc if f1 > 0 else 1.0 - acc
-    return 2 * p / (1 + p)
+def _baseline(tab: dict, f: dict) -> tuple:
+    """``(label, f(initial metrics) -> value or None)`` a finding compares with: its
+    ``baseline:`` (one the table's task offers) or the task's trivial baseline."""
+    task = get_task(tab["task"])
+    if f.get("baseline") is not None:
+        return task.finding_baselines[f["baseline"]]
+    return task.baseline, lambda initial: initial.get(f["metric"])
 
 
 def evaluate_findings(tab: dict, results: dict) -> list:
@@ -288,9 +294,8 @@ def evaluate_findings(tab: dict, results: dict) -> list:
         m = f["metric"]
         values = {"ours": {r: results[r]["metrics"].get(m) for r in results},
                   "report": {r["name"]: (r.get("report") or {}).get(m) for r in tab["rows"]}}
-        initial = {r: results[r]["initial"].get(m) for r in results}
-        if f.get("baseline") == "constant":
-            initial = {r: constant_f1(results[r]["initial"]) for r in results}
+        of = _baseline(tab, f)[1]
+        initial = {r: of(results[r]["initial"]) for r in results}
         ours, report, status = _finding(tab, f, values, initial)
         out.append({"text": f["text"], "ours": ours, "report": report, "status": status})
     return out
@@ -307,7 +312,7 @@ def format_report(tab: dict, res: dict) -> str:
     """Markdown: our table with the report's values beside it, then the findings."""
     metrics = list(tab["metrics"])
     reported = [m for m in metrics if any(m in (r.get("report") or {}) for r in tab["rows"])]
-    settings = tab["task"] in ("classification", "autoencoder")
+    settings = get_task(tab["task"]).deformed_inputs
     header = ["row", "model"] + (["σ (px)", "MJP"] if settings else [])
     header += [tab["metrics"][m]["label"] for m in metrics]
     header += [f"report {tab['metrics'][m]['label']}" for m in reported]

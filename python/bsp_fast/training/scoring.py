@@ -1,81 +1,40 @@
 """What each task scores, as one ``torch.nn.Module`` of streaming metrics per split.
 
-* classification: F1 of the crossing class, precision, recall, accuracy (argmax of two
-  logits or sigmoid >= 0.5 of one);
-* autoencoder: PCK@0.05 (joint-bbox diagonal) and PCKhn@0.1 (hips-neck length) on
-  de-normalised **pixels** (output and clean target both mapped back with the target's
-  shift and scale), over the joints present in the target; the realised missing-joint
-  ratio of the inputs (MJR);
-* lifting: the prediction is de-normalised with the hips-neck length of the clip's
-  reference skeleton (age, gender) and its hips put on the target's hips, then MPJPE,
-  N-MPJPE, PA-MPJPE and MPJVE in mm on the frames the model predicts (``frame_slice``);
-* pose_estimation: PCK@0.05 and PCKhn@0.1 in crop pixels over the visible joints.
-
-Every value is a global sum over the split divided by a global count (torchmetrics
-states, reduced over DDP processes), never a mean of batch means. ``loss`` is the model's
-loss averaged over clips.
+The metrics and how a model's output is scored belong to the task objects
+(``bsp_fast.training.tasks``); :class:`TaskMetrics` holds a task's torchmetrics states,
+the loss and the reduction. Every value is a global sum over the split divided by a
+global count (torchmetrics states, reduced over DDP processes), never a mean of batch
+means. ``loss`` is the model's loss averaged over clips. See docs/training.md, Metrics.
 """
 from __future__ import annotations
 
-import functools
-
 import torch
 
-__all__ = ["TaskMetrics", "hips_neck_lengths", "UNITS"]
+from .tasks import TASKS, get_task
+from .tasks.lifting import hips_neck_lengths
 
-HIPS, NECK = 1, 8
-UNITS = {"mpjpe_mm": "mm", "n_mpjpe_mm": "mm", "pa_mpjpe_mm": "mm", "mpjve_mm": "mm",
-         "pck_0.05": "fraction", "pckhn_0.1": "fraction", "mjr": "fraction",
-         "f1": "fraction", "precision": "fraction", "recall": "fraction",
-         "accuracy": "fraction"}
+__all__ = ["TaskMetrics", "hips_neck_lengths", "UNITS", "initial_metrics", "log_initial"]
 
-
-@functools.lru_cache(maxsize=None)
-def _hips_neck(age: str, gender: str) -> float:
-    from .. import skeleton
-
-    helper = getattr(skeleton, "hips_neck_length", None)
-    if helper is not None:
-        return float(helper(age, gender))
-    from ..geometry import forward_kinematics
-
-    comp = forward_kinematics(skeleton.reference_pose((age, gender), "relative"))
-    return float(((comp[NECK, :3] - comp[HIPS, :3]) ** 2).sum() ** 0.5)
-
-
-def hips_neck_lengths(meta: dict, device=None) -> torch.Tensor:
-    """(B,) reference-skeleton hips-neck lengths in metres of a batch's (age, gender)."""
-    values = [_hips_neck(a, g) for a, g in zip(meta["age"], meta["gender"])]
-    return torch.tensor(values, dtype=torch.float32, device=device)
+#: ``{metric key: unit}`` of every task's metrics.
+UNITS = {k: v for t in TASKS.values() for k, v in t.units.items()}
 
 
 class TaskMetrics(torch.nn.Module):
     """``update_loss(loss, n)``, ``update(output, batch, model)``, ``compute() -> dict``
-    of floats, ``reset()``."""
+    of floats, ``reset()``. ``model`` is the one that produced ``output`` (its
+    ``frame_slice`` says which frames the output stands for)."""
 
     def __init__(self, task: str):
         super().__init__()
         from torchmetrics import MeanMetric
 
-        from .. import metrics as M
-
+        self.spec = get_task(task)
         self.task = task
         self.loss = MeanMetric()
-        if task == "classification":
-            self.scores = torch.nn.ModuleDict({"cls": M.ClassificationMetrics()})
-        elif task in ("autoencoder", "pose_estimation"):
-            self.scores = torch.nn.ModuleDict({
-                "pck_0.05".replace(".", "_"): M.PCK(alpha=0.05, norm="bbox"),
-                "pckhn_0.1".replace(".", "_"): M.PCK(alpha=0.1, norm="hips_neck")})
-            if task == "autoencoder":
-                self.scores["mjr"] = MeanMetric()
-        elif task == "lifting":
-            self.scores = torch.nn.ModuleDict({
-                "mpjpe_mm": M.MPJPE(), "n_mpjpe_mm": M.NMPJPE(), "pa_mpjpe_mm": M.PAMPJPE(),
-                "mpjve_mm": M.MPJVE()})
-        else:
-            raise ValueError(f"task must be one of ['classification', 'autoencoder', "
-                             f"'lifting', 'pose_estimation'], got {task!r}")
+        modules = self.spec.metric_modules()
+        # ModuleDict keys cannot hold "."; keep the metric keys beside them
+        self._keys = {k.replace(".", "_"): k for k in modules}
+        self.scores = torch.nn.ModuleDict({k.replace(".", "_"): m for k, m in modules.items()})
 
     def update_loss(self, loss: torch.Tensor, n: int) -> None:
         loss = loss.detach().float()
@@ -84,45 +43,11 @@ class TaskMetrics(torch.nn.Module):
 
     @torch.no_grad()
     def update(self, output: torch.Tensor, batch: dict, model) -> None:
-        output = output.detach().float()
-        getattr(self, f"_{self.task}")(output, batch, model)
-
-    def _classification(self, output, batch, model) -> None:
-        self.scores["cls"].update(output, batch["label"])
-
-    def _autoencoder(self, output, batch, model) -> None:
-        L = batch["targets"].shape[1]
-        sl = model.frame_slice(L)
-        target = batch["targets"][:, sl].float()
-        scale = batch["target_scale"][:, sl, None, None].float()
-        shift = batch["target_shift"][:, sl, None, :].float()
-        present = (target != 0).any(-1)
-        present[..., HIPS] = True  # a missing joint is exactly (0, 0); the hips always count
-        pred_px, gt_px = output * scale + shift, target * scale + shift
-        self.scores["pck_0_05"].update(pred_px, gt_px, visible=present)
-        self.scores["pckhn_0_1"].update(pred_px, gt_px, visible=present)
-        missing = (~batch["visible"]).float()
-        self.scores["mjr"].update(missing.mean(), missing.numel())
-
-    def _pose_estimation(self, output, batch, model) -> None:
-        sl = model.frame_slice(batch["targets"].shape[1])
-        target, visible = batch["targets"][:, sl].float(), batch["visible"][:, sl]
-        self.scores["pck_0_05"].update(output, target, visible=visible)
-        self.scores["pckhn_0_1"].update(output, target, visible=visible)
-
-    def _lifting(self, output, batch, model) -> None:
-        from .. import metrics as M
-
-        sl = model.frame_slice(batch["targets_m"].shape[1])
-        gt_m = batch["targets_m"][:, sl].float()
-        hips_neck = hips_neck_lengths(batch["meta"], device=output.device)
-        pred_mm = M.denormalise_lifting(output, gt_m, hips_neck) * 1000.0
-        gt_mm = gt_m * 1000.0
-        for key in ("mpjpe_mm", "n_mpjpe_mm", "pa_mpjpe_mm", "mpjve_mm"):
-            self.scores[key].update(pred_mm, gt_mm)
+        by_key = {self._keys[k]: m for k, m in self.scores.items()}
+        self.spec.update_metrics(by_key, output.detach().float(), batch, model)
 
     def compute(self) -> dict:
-        out = {"loss": _scalar(self.loss) if self.loss.update_count else float("nan")}
+        out = {"loss": float(self.loss.compute()) if self.loss.update_count else float("nan")}
         for name, metric in self.scores.items():
             if not metric.update_count:
                 continue
@@ -130,7 +55,7 @@ class TaskMetrics(torch.nn.Module):
             if isinstance(value, dict):
                 out.update({k: float(v) for k, v in value.items()})
             else:
-                out[name.replace("_0_", "_0.")] = float(value)
+                out[self._keys[name]] = float(value)
         return out
 
     def reset(self) -> None:
@@ -139,5 +64,46 @@ class TaskMetrics(torch.nn.Module):
             metric.reset()
 
 
-def _scalar(metric) -> float:
-    return float(metric.compute())
+@torch.no_grad()
+def initial_metrics(task: str, train_loader, eval_loaders: dict, limit: int = 0,
+                    model=None) -> dict:
+    """Fits ``bsp_fast.models.trivial_baseline(task)`` on the train batches and scores it
+    like a trained model on each of ``eval_loaders`` (``{split: loader}``):
+    ``{"baseline": name, split: {metric: value}}``. ``limit`` > 0 caps the batches read.
+    ``model`` (the model about to be trained) gets ``init_from_baseline(baseline)``."""
+    import itertools
+
+    from .. import models
+
+    spec = get_task(task)
+    base = models.trivial_baseline(task)
+    base.eval()
+    cap = (lambda it: itertools.islice(it, limit)) if limit else (lambda it: it)
+    base.fit(cap(iter(train_loader)))
+    if model is not None:
+        model.init_from_baseline(base)
+    out = {"baseline": spec.baseline}
+    for split, loader in eval_loaders.items():
+        metrics = TaskMetrics(task)
+        for batch in cap(iter(loader)):
+            output = base.forward_batch(batch)
+            metrics.update_loss(base.loss(output, batch), spec.batch_size(batch))
+            metrics.update(output, batch, base)
+        out[split] = metrics.compute()
+    return out
+
+
+def log_initial(trainer, initial: dict, quiet: bool) -> None:
+    """Logs :func:`initial_metrics` (``initial/SPLIT/METRIC`` at step 0) to the trainer's
+    loggers and prints them unless ``quiet``."""
+    values = {f"initial/{split}/{k}": v for split in ("val", "test")
+              for k, v in initial.get(split, {}).items() if v is not None}
+    for logger in trainer.loggers:
+        logger.log_metrics(values, step=0)
+        logger.save()
+    if not quiet:
+        print(f"initial metrics ({initial['baseline']}, before training):")
+        for split in ("val", "test"):
+            row = ", ".join(f"{k} {v:.4g}" for k, v in initial.get(split, {}).items()
+                            if v is not None)
+            print(f"  {split}: {row}")

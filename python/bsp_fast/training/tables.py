@@ -1,9 +1,10 @@
 """Runs side by side in the layout of the report's tables, with the initial-metrics row.
 
-* lifting: MPJPE, N-MPJPE, PA-MPJPE, MPJVE (mm);
-* autoencoder: noise sigma, MJP, realised missing-joint ratio, PCK@0.05, PCKhn@0.1 (%);
-* classification: noise sigma, MJP, F1, precision, recall, accuracy;
-* pose_estimation: PCK@0.05, PCKhn@0.1 (%, crop pixels).
+The columns are each task object's (``bsp_fast.training.tasks``): the noise sigma and MJP
+of the run where inputs can be deformed (classification, autoencoder), then its metrics
+(lifting: MPJPE, N-MPJPE, PA-MPJPE, MPJVE in mm; autoencoder: MJR, PCK@0.05, PCKhn@0.1
+in %; classification: F1, precision, recall, accuracy; pose_estimation: PCK@0.05,
+PCKhn@0.1 in %, crop pixels).
 
 Every table starts with the "initial metrics" of each distinct data setting: the trivial
 baseline (majority class, identity, mean training pose, mean crop skeleton) on the same
@@ -17,23 +18,13 @@ import math
 from pathlib import Path
 
 from .runs import RunError, read_run
+from .tasks import TASKS
 
 __all__ = ["COLUMNS", "table_rows", "format_table", "runs_table"]
 
-# (header, where, metric key or config key, format); where: "m" metric, "c" config
-COLUMNS = {
-    "classification": (("σ (px)", "c", "noise", "g"), ("MJP", "c", "mjp", "mjp"),
-                       ("F1", "m", "f1", ".3f"), ("precision", "m", "precision", ".3f"),
-                       ("recall", "m", "recall", ".3f"), ("accuracy", "m", "accuracy", ".3f")),
-    "autoencoder": (("σ (px)", "c", "noise", "g"), ("MJP", "c", "mjp", "mjp"),
-                    ("MJR", "m", "mjr", ".4f"), ("PCK@0.05 (%)", "m", "pck_0.05", "pct"),
-                    ("PCKhn@0.1 (%)", "m", "pckhn_0.1", "pct")),
-    "lifting": (("MPJPE (mm)", "m", "mpjpe_mm", ".2f"), ("N-MPJPE (mm)", "m", "n_mpjpe_mm", ".2f"),
-                ("PA-MPJPE (mm)", "m", "pa_mpjpe_mm", ".2f"),
-                ("MPJVE (mm)", "m", "mpjve_mm", ".2f")),
-    "pose_estimation": (("PCK@0.05 (%)", "m", "pck_0.05", "pct"),
-                        ("PCKhn@0.1 (%)", "m", "pckhn_0.1", "pct")),
-}
+#: ``{task: ((header, where, key, format), ...)}``; where: "m" metric, "c" config (the
+#: task objects' ``table_columns()``)
+COLUMNS = {name: task.table_columns() for name, task in TASKS.items()}
 SETTING_KEYS = ("data", "clip_length", "clip_offset", "benchmark", "balance", "noise", "mjp",
                 "lifting_target", "crop_size", "limit_batches", "batch_size")
 

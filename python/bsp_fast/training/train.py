@@ -15,6 +15,7 @@ from pathlib import Path
 from . import config as C
 from .runs import ENV_TMP, RunDirectory, RunError, default_run_dir, read_run, \
     resolve_checkpoint, write_json
+from .tasks import get_task
 
 __all__ = ["train", "main", "TrainResult"]
 
@@ -71,11 +72,10 @@ def resolve_config(cli: dict, config_path=None) -> tuple:
     return cfg, resume
 
 
-def _rank() -> int:
-    for key in ("RANK", "LOCAL_RANK", "SLURM_PROCID"):
-        if os.environ.get(key, "").isdigit():
-            return int(os.environ[key])
-    return 0
+def _rank() -> int:  # Lightning's: from the launcher's environment, then the trainer's
+    from lightning.pytorch.utilities import rank_zero_only
+
+    return rank_zero_only.rank
 
 
 # ---------------------------------------------------------------------- data
@@ -96,10 +96,9 @@ def make_datamodule(cfg: dict, h5=None):
     for key in ("fov", "eval_clip_offset"):
         if cfg[key] is not None:
             convert[key] = cfg[key]
-    dataset_options = {}
-    if cfg["task"] == "lifting":
-        dataset_options["lifting_target"] = cfg["lifting_target"]
-    augment = cfg["augment"] and cfg["task"] in ("classification", "autoencoder")
+    task = get_task(cfg["task"])
+    dataset_options = task.dataset_options(cfg)
+    augment = cfg["augment"] and task.augments
     return BSPDataModule(**paths, task=cfg["task"], clip_length=cfg["clip_length"],
                          clip_offset=cfg["clip_offset"], benchmark=cfg["benchmark"],
                          balance=cfg["balance"], noise=cfg["noise"], mjp=cfg["mjp"],
@@ -187,9 +186,10 @@ def _extra_logger(kind: str, tmp: Path, name: str):
     return WandbLogger(save_dir=str(tmp), name=name, project="bsp_fast", offline=True)
 
 
-def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = True):
+def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = True,
+                 callbacks=()):
     """The Lightning Trainer of a run (``tmp``: run directory being written) or, with
-    ``fit=False``, an evaluation-only one (no logger, no checkpoints)."""
+    ``fit=False``, an evaluation-only one (no logger, no checkpoints; ``callbacks``)."""
     import warnings
 
     import lightning.pytorch as pl
@@ -210,7 +210,8 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
                   limit_train_batches=limit, limit_val_batches=limit, limit_test_batches=limit)
     try:
         if not fit:
-            return pl.Trainer(devices=1, logger=False, enable_checkpointing=False, **common)
+            return pl.Trainer(devices=1, logger=False, enable_checkpointing=False,
+                              callbacks=list(callbacks), **common)
         from lightning.pytorch.loggers import CSVLogger
 
         loggers = [CSVLogger(save_dir=str(tmp), name="logs")]
@@ -248,6 +249,7 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
     import lightning.pytorch as pl
     import torch
 
+    from .scoring import log_initial
     from .tasks import TASK_MODULES
 
     shared = _shared_tmp(cfg)
@@ -299,7 +301,7 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
         else:
             initial = _initial(cfg, dm, module.net)
         seconds["initial"] = time.perf_counter() - t0
-        _log_initial(trainer, initial, cfg["quiet"])
+        log_initial(trainer, initial, cfg["quiet"])
         pl.seed_everything(cfg["seed"], workers=True, verbose=False)
         os.environ[ENV_TMP] = str(tmp)
         try:
@@ -316,45 +318,30 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
 
 
 def _initial(cfg: dict, dm, model=None) -> dict:
-    from .tasks import initial_metrics
+    from .scoring import initial_metrics
 
     loaders = {"val": dm.val_dataloader(), "test": dm.test_dataloader()}
     return initial_metrics(cfg["task"], dm.train_dataloader(), loaders,
                            limit=cfg["limit_batches"], model=model)
 
 
-def _log_initial(trainer, initial: dict, quiet: bool) -> None:
-    values = {f"initial/{split}/{k}": v for split in ("val", "test")
-              for k, v in initial.get(split, {}).items() if v is not None}
-    for logger in trainer.loggers:
-        logger.log_metrics(values, step=0)
-        logger.save()
-    if not quiet:
-        print(f"initial metrics ({initial['baseline']}, before training):")
-        for split in ("val", "test"):
-            row = ", ".join(f"{k} {v:.4g}" for k, v in initial.get(split, {}).items()
-                            if v is not None)
-            print(f"  {split}: {row}")
-
-
 def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds):
     from .. import __version__
     from .curves import plot_curves, read_logs
-    from .scoring import UNITS
 
     test = dict(trainer.lightning_module.results.get("test", {}))
-    logs = read_logs(tmp)
-    val_loss = logs.get("val/loss", {})
-    best_epoch = min(val_loss, key=val_loss.get) if val_loss else None
-    val = {k.split("/", 1)[1]: s[best_epoch] for k, s in logs.items()
-           if k.startswith("val/") and best_epoch in s} if best_epoch is not None else {}
+    best_epoch = _best_epoch(trainer)  # 1-based
+    logs = read_logs(tmp)  # the best epoch's other val metrics, as logged
+    val = {k.split("/", 1)[1]: s[best_epoch - 1] for k, s in logs.items()
+           if k.startswith("val/") and best_epoch - 1 in s} if best_epoch is not None else {}
     epochs = int(trainer.current_epoch)
     module = trainer.lightning_module
+    units = get_task(cfg["task"]).units
     metrics = {"task": cfg["task"], "model": cfg["model"],
                "hparams": module.hparams["hparams"], "test": test, "val": val,
-               "initial": initial, "best_epoch": None if best_epoch is None else best_epoch + 1,
+               "initial": initial, "best_epoch": best_epoch,
                "epochs": epochs, "best_checkpoint": "checkpoints/best.ckpt",
-               "units": {k: UNITS[k] for k in test if k in UNITS}, "precision": precision,
+               "units": {k: units[k] for k in test if k in units}, "precision": precision,
                "world_size": int(trainer.world_size), "seconds": seconds}
     write_json(metrics, tmp / "metrics.json")
     import lightning
@@ -367,12 +354,22 @@ def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds):
     # force/resume are actions of this command, not settings of the run
     C.write_yaml(dict(cfg, force=False, resume=None), tmp / "config.yaml", extra)
     plot_curves(tmp, cfg["task"], initial=initial.get("val"),
-                title=f"{cfg['task']} / {cfg['model']}")
+                title=f"{cfg['task']} / {cfg['model']}", best_epoch=best_epoch)
     return TrainResult(run_dir=final, metrics=test, val=val, initial=initial,
                        best_checkpoint=final / "checkpoints" / "best.ckpt",
                        last_checkpoint=final / "checkpoints" / "last.ckpt",
                        best_epoch=metrics["best_epoch"], epochs=epochs, config=cfg,
                        seconds=seconds)
+
+
+def _best_epoch(trainer) -> int | None:
+    """1-based epoch of ``ModelCheckpoint``'s best checkpoint (None: none validated)."""
+    from .tasks import checkpoint_info
+
+    best = trainer.checkpoint_callback
+    if not best.best_model_path or best.best_model_score is None:
+        return None
+    return int(checkpoint_info(best.best_model_path)["epoch"]) + 1
 
 
 def train(task: str | None = None, model: str | None = None, data=None, out=None, *,

@@ -1,10 +1,14 @@
-"""One LightningModule per task, each taking any model registered for that task.
+"""The per-task LightningModules: :class:`ClassificationTask`, :class:`AutoencoderTask`,
+:class:`LiftingTask`, :class:`PoseEstimationTask` (public API, docs/training.md).
 
-The module owns the model (``bsp_fast.models.create(task, name, **hparams)``), uses the
-model's own loss and optimiser defaults, and scores val/test with the streaming metrics of
-:class:`~bsp_fast.training.scoring.TaskMetrics`. Everything needed to rebuild it is saved
-in the checkpoint (``save_hyperparameters``): ``load_module(ckpt)`` gives back the same
-module whatever task it was.
+Each takes any model registered for its task (``bsp_fast.models.create(task, name,
+**hparams)``), trains it with the model's own loss and optimiser defaults, and scores
+val/test with :class:`~bsp_fast.training.scoring.TaskMetrics` the way its task object
+(``get_task(task)``) says: e.g. lifting de-normalises with the reference hips-neck length
+and scores only the frames the model predicts. ``predict_step`` returns the de-normalised
+outputs ``bsp-predict`` writes. Everything needed to rebuild a module is saved in the
+checkpoint (``save_hyperparameters``): ``load_module(ckpt)`` gives back the same module
+whatever task it was.
 """
 from __future__ import annotations
 
@@ -13,23 +17,26 @@ from pathlib import Path
 import lightning.pytorch as pl
 import torch
 
-from .scoring import TaskMetrics
+from ..scoring import TaskMetrics
+from . import TASKS, get_task
 
 __all__ = ["TaskModule", "ClassificationTask", "AutoencoderTask", "LiftingTask",
            "PoseEstimationTask", "TASK_MODULES", "load_module", "checkpoint_info",
-           "initial_metrics", "BASELINES"]
+           "PREDICTION_STRINGS"]
 
-#: What the trivial baseline of each task predicts (the "initial metrics" row).
-BASELINES = {"classification": "majority class", "autoencoder": "identity (noisy input)",
-             "lifting": "mean training pose", "pose_estimation": "mean crop skeleton"}
-
-
-def _batch_size(batch: dict) -> int:
-    return int(batch["label"].shape[0])
+#: per-clip strings ``predict_step`` returns besides the arrays
+PREDICTION_STRINGS = ("video_id", "pedestrian_id", "age", "gender")
 
 
 class TaskModule(pl.LightningModule):
-    """Base class: training/validation/test steps, metric logging and the optimiser."""
+    """Base class: training/validation/test/predict steps, metric logging, optimiser.
+
+    ``TaskModule(model, hparams=None, lr=None, config=None)``: ``model`` a registered
+    model name of the subclass's task, ``hparams`` its hyper-parameters, ``lr`` the
+    learning rate (``None``: the model's default), ``config`` free settings saved with the
+    checkpoint. After ``trainer.validate``/``test``, ``results["val"]``/``["test"]`` hold
+    the metrics (floats, mm for 3D), as logged under ``val/...`` and ``test/...``.
+    """
 
     task: str = ""
 
@@ -38,8 +45,9 @@ class TaskModule(pl.LightningModule):
         super().__init__()
         if task is not None and task != self.task:
             raise ValueError(f"{type(self).__name__} trains task {self.task!r}, not {task!r}")
-        from .. import models
+        from ... import models
 
+        self.spec = get_task(self.task)
         self.net = models.create(self.task, model, **dict(hparams or {}))
         # the model's complete hyper-parameters (defaults filled in) go in the checkpoint
         self.save_hyperparameters({"task": self.task, "model": model,
@@ -55,19 +63,25 @@ class TaskModule(pl.LightningModule):
     def forward(self, batch: dict) -> torch.Tensor:
         return self.net.forward_batch(batch)
 
+    def scored_frames(self, L: int) -> slice:
+        """The frames of an ``L``-frame clip that are scored and predicted."""
+        return self.spec.scored_frames(self.net, L)
+
     # ------------------------------------------------------------------ steps
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
+        self.spec.check_batch(batch)
         output = self.net.forward_batch(batch)
         loss = self.net.loss(output, batch)
-        n = _batch_size(batch)
+        n = self.spec.batch_size(batch)
         self.train_loss.update(loss.detach().float(), n)
         self.log("loss", loss.detach(), prog_bar=True, logger=False, on_step=True,
                  on_epoch=False, batch_size=n)
         return loss
 
     def _eval_step(self, batch: dict, metrics: TaskMetrics) -> None:
+        self.spec.check_batch(batch)
         output = self.net.forward_batch(batch)
-        metrics.update_loss(self.net.loss(output, batch), _batch_size(batch))
+        metrics.update_loss(self.net.loss(output, batch), self.spec.batch_size(batch))
         metrics.update(output, batch, self.net)
 
     def validation_step(self, batch: dict, batch_idx: int) -> None:
@@ -76,8 +90,19 @@ class TaskModule(pl.LightningModule):
     def test_step(self, batch: dict, batch_idx: int) -> None:
         self._eval_step(batch, self.test_metrics)
 
-    def predict_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
-        return self.net.forward_batch(batch)
+    def predict_step(self, batch: dict, batch_idx: int) -> dict:
+        """The de-normalised outputs of one batch (tensors; the datasets of
+        ``bsp-predict``): the task's arrays, ``frames``, ``clip_id``, ``row``,
+        ``start_frame``, ``label``, and lists of the clips' ``video_id``,
+        ``pedestrian_id``, ``age``, ``gender``."""
+        self.spec.check_batch(batch)
+        output = self.net.forward_batch(batch).detach().float()
+        out = self.spec.predictions(output, batch, self.net)
+        meta = batch["meta"]
+        out.update(clip_id=meta["clip_id"], row=meta["row"], start_frame=meta["start_frame"],
+                   label=batch["label"])
+        out.update({k: list(meta[k]) for k in PREDICTION_STRINGS})
+        return out
 
     # ------------------------------------------------------------------ epoch ends
     def _log_metrics(self, prefix: str, metrics: TaskMetrics) -> None:
@@ -106,30 +131,33 @@ class TaskModule(pl.LightningModule):
 
     # ------------------------------------------------------------------ optimiser
     def configure_optimizers(self):
-        optimizer, scheduler, interval = self.net.configure_optimizers(lr=self.hparams.lr)
-        if scheduler is None:
-            return optimizer
-        return {"optimizer": optimizer,
-                "lr_scheduler": {"scheduler": scheduler, "interval": interval or "epoch"}}
+        """The model's report defaults (AdamW, its scheduler) in Lightning's format."""
+        return self.net.configure_optimizers(lr=self.hparams.lr)
 
 
 class ClassificationTask(TaskModule):
-    """Crossing vs not crossing from a 2D clip: F1, precision, recall, accuracy."""
+    """Crossing vs not crossing from a 2D clip: ``f1`` (crossing = positive class),
+    ``precision``, ``recall``, ``accuracy``."""
     task = "classification"
 
 
 class AutoencoderTask(TaskModule):
-    """Denoise/complete normalised 2D: PCK@0.05 and PCKhn@0.1 on de-normalised pixels."""
+    """Denoise/complete normalised 2D: ``pck_0.05`` and ``pckhn_0.1`` on pixels (output
+    and clean target de-normalised with the target's shift and scale), ``mjr``."""
     task = "autoencoder"
 
 
 class LiftingTask(TaskModule):
-    """2D -> 3D: MPJPE, N-MPJPE, PA-MPJPE, MPJVE in mm (reference hips-neck length)."""
+    """2D -> 3D: ``mpjpe_mm``, ``n_mpjpe_mm``, ``pa_mpjpe_mm``, ``mpjve_mm`` of the output
+    scaled by the reference skeleton's hips-neck length of each clip's (age, gender) and
+    root-aligned on the target (``bsp_fast.metrics.denormalise_lifting``), on the frames
+    the model predicts (:meth:`scored_frames`; PoseFormer: the central ones)."""
     task = "lifting"
 
 
 class PoseEstimationTask(TaskModule):
-    """Crops -> 2D joints in crop pixels: PCK@0.05 and PCKhn@0.1 over visible joints."""
+    """Crops -> 2D joints in crop pixels: ``pck_0.05`` and ``pckhn_0.1`` over the
+    visible joints."""
     task = "pose_estimation"
 
 
@@ -142,12 +170,12 @@ def checkpoint_info(ckpt_path) -> dict:
     config), read without building the model."""
     path = Path(ckpt_path)
     try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+        ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
     except Exception as exc:
         raise ValueError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") \
             from None
     hp = ckpt.get("hyper_parameters") if isinstance(ckpt, dict) else None
-    if not isinstance(hp, dict) or hp.get("task") not in TASK_MODULES or "model" not in hp:
+    if not isinstance(hp, dict) or hp.get("task") not in TASKS or "model" not in hp:
         raise ValueError(f"{path}: not a bsp-train checkpoint (no task/model hyper-parameters)")
     info = dict(hp)
     info["epoch"] = ckpt.get("epoch")
@@ -164,31 +192,3 @@ def load_module(ckpt_path, task: str | None = None, map_location="cpu") -> TaskM
     cls = TASK_MODULES[info["task"]]
     return cls.load_from_checkpoint(str(ckpt_path), map_location=map_location,
                                     weights_only=True)
-
-
-@torch.no_grad()
-def initial_metrics(task: str, train_loader, eval_loaders: dict, limit: int = 0,
-                    model=None) -> dict:
-    """Fits ``bsp_fast.models.trivial_baseline(task)`` on the train batches and scores it
-    like a trained model on each of ``eval_loaders`` (``{split: loader}``):
-    ``{"baseline": name, split: {metric: value}}``. ``limit`` > 0 caps the batches read.
-    ``model`` (the model about to be trained) gets ``init_from_baseline(baseline)``."""
-    import itertools
-
-    from .. import models
-
-    base = models.trivial_baseline(task)
-    base.eval()
-    cap = (lambda it: itertools.islice(it, limit)) if limit else (lambda it: it)
-    base.fit(cap(iter(train_loader)))
-    if model is not None:
-        model.init_from_baseline(base)
-    out = {"baseline": BASELINES[task]}
-    for split, loader in eval_loaders.items():
-        metrics = TaskMetrics(task)
-        for batch in cap(iter(loader)):
-            output = base.forward_batch(batch)
-            metrics.update_loss(base.loss(output, batch), _batch_size(batch))
-            metrics.update(output, batch, base)
-        out[split] = metrics.compute()
-    return out

@@ -1,0 +1,51 @@
+"""Crossing vs not crossing from a 2D clip: F1 of the crossing class, precision, recall,
+accuracy (argmax of two logits, or sigmoid >= 0.5 of one)."""
+from __future__ import annotations
+
+from .base import Metric, Task
+
+__all__ = ["Classification", "constant_f1"]
+
+
+def constant_f1(initial: dict):
+    """F1 of the better constant classifier on a split, from the majority-class baseline's
+    metrics there: always "crossing" scores 2p / (1 + p) with p the crossing share, which
+    is at least the majority class's F1 (0 when the majority does not cross). A classifier
+    that only learnt to say "crossing" reaches this without looking at the poses."""
+    acc, f1 = initial.get("accuracy"), initial.get("f1")
+    if acc is None or f1 is None:
+        return None
+    p = acc if f1 > 0 else 1.0 - acc
+    return 2 * p / (1 + p)
+
+
+class Classification(Task):
+    name = "classification"
+    description = "crossing vs not crossing from a 2D clip"
+    batch_keys = ("inputs", "visible", "targets", "label", "meta")
+    baseline = "majority class"
+    metrics = (Metric("f1", "F1", "fraction", "higher", ".3f"),
+               Metric("precision", "precision", "fraction", "higher", ".3f"),
+               Metric("recall", "recall", "fraction", "higher", ".3f"),
+               Metric("accuracy", "accuracy", "fraction", "higher", ".3f"))
+    curves = ("f1", "precision", "recall")
+    deformed_inputs = True
+    augments = True
+    finding_baselines = {"constant": ("best constant", constant_f1)}
+
+    def metric_modules(self) -> dict:
+        from ... import metrics as M
+
+        return {"cls": M.ClassificationMetrics()}
+
+    def update_metrics(self, scores, output, batch, model) -> None:
+        scores["cls"].update(output, batch["label"])
+
+    def predictions(self, output, batch, model) -> dict:
+        import torch
+
+        prob = torch.sigmoid(output) if output.ndim == 1 else torch.softmax(output, -1)[:, 1]
+        sl = self.scored_frames(model, batch["inputs"].shape[1])
+        return {"logits": output, "probability": prob,
+                "prediction": (prob >= 0.5).to(torch.int8),
+                "frames": batch["meta"]["frames"][:, sl]}

@@ -1,0 +1,66 @@
+"""2D -> 3D lifting: MPJPE, N-MPJPE, PA-MPJPE, MPJVE in mm after de-normalising the
+output with the reference skeleton's hips-neck length of the clip's (age, gender)."""
+from __future__ import annotations
+
+from .base import Metric, Task
+
+__all__ = ["Lifting", "hips_neck_lengths"]
+
+
+def hips_neck_lengths(meta: dict, device=None):
+    """(B,) float32 tensor: the reference-skeleton hips-neck lengths in metres of a
+    batch's (age, gender) (``bsp_fast.skeleton.hips_neck_length``)."""
+    import torch
+
+    from ... import skeleton
+
+    values = skeleton.hips_neck_length(list(meta["age"]), list(meta["gender"]))
+    return torch.as_tensor(values, dtype=torch.float32, device=device)
+
+
+class Lifting(Task):
+    name = "lifting"
+    description = "2D poses -> 3D poses"
+    batch_keys = ("inputs", "visible", "targets", "targets_m", "label", "meta")
+    baseline = "mean training pose"
+    metrics = (Metric("mpjpe_mm", "MPJPE", "mm", "lower", ".2f"),
+               Metric("n_mpjpe_mm", "N-MPJPE", "mm", "lower", ".2f"),
+               Metric("pa_mpjpe_mm", "PA-MPJPE", "mm", "lower", ".2f"),
+               Metric("mpjve_mm", "MPJVE", "mm", "lower", ".2f"))
+    curves = ("mpjpe_mm", "n_mpjpe_mm", "pa_mpjpe_mm", "mpjve_mm")
+    prediction_units = "metres"
+
+    def dataset_options(self, cfg: dict) -> dict:
+        return {"lifting_target": cfg["lifting_target"]}
+
+    def metric_modules(self) -> dict:
+        from ... import metrics as M
+
+        return {"mpjpe_mm": M.MPJPE(), "n_mpjpe_mm": M.NMPJPE(), "pa_mpjpe_mm": M.PAMPJPE(),
+                "mpjve_mm": M.MPJVE()}
+
+    def metres(self, output, batch, model) -> tuple:
+        """``(prediction, target)`` in metres on the scored frames: the normalised output
+        scaled by the reference hips-neck length, its hips put on the target's hips."""
+        from ... import metrics as M
+
+        sl = self.scored_frames(model, batch["targets_m"].shape[1])
+        gt_m = batch["targets_m"][:, sl].float()
+        hips_neck = hips_neck_lengths(batch["meta"], device=output.device)
+        return M.denormalise_lifting(output, gt_m, hips_neck), gt_m
+
+    def update_metrics(self, scores, output, batch, model) -> None:
+        pred_m, gt_m = self.metres(output, batch, model)
+        pred_mm, gt_mm = pred_m * 1000.0, gt_m * 1000.0
+        for key in ("mpjpe_mm", "n_mpjpe_mm", "pa_mpjpe_mm", "mpjve_mm"):
+            scores[key].update(pred_mm, gt_mm)
+
+    def predictions(self, output, batch, model) -> dict:
+        """``metres``: hips at the origin, reference-skeleton scale; ``metres_aligned``:
+        hips on the target's, as scored."""
+        aligned, gt_m = self.metres(output, batch, model)
+        hn = hips_neck_lengths(batch["meta"], device=output.device)
+        sl = self.scored_frames(model, batch["targets_m"].shape[1])
+        return {"metres": output * hn[:, None, None, None], "normalised": output,
+                "metres_aligned": aligned, "target_metres": gt_m,
+                "frames": batch["meta"]["frames"][:, sl]}
