@@ -58,7 +58,6 @@ def curves_figure(logs: dict, task: str, initial: dict | None = None,
     epoch of the lowest val loss)."""
     from .._extras import require
 
-
     matplotlib = require("matplotlib", "bsp-train (curves.png)", extra="torch")
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
