@@ -20,7 +20,7 @@ from .pose_estimation import PoseEstimation
 
 __all__ = ["Task", "Metric", "TASKS", "get_task", "BASELINES", "TaskModule",
            "ClassificationTask", "AutoencoderTask", "LiftingTask", "PoseEstimationTask",
-           "TASK_MODULES", "load_module", "checkpoint_info", "initial_metrics"]
+           "TASK_MODULES", "load_module", "checkpoint_info"]
 
 #: ``{name: task object}`` in the report's order.
 TASKS = {t.name: t for t in (Classification(), Autoencoder(), Lifting(), PoseEstimation())}
@@ -47,12 +47,8 @@ def __getattr__(name):
         import importlib
 
         return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-    if name == "initial_metrics":
-        from ..scoring import initial_metrics
-
-        return initial_metrics
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_LAZY) | {"initial_metrics"})
+    return sorted(set(globals()) | set(_LAZY))
