@@ -65,6 +65,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "to a full run with the same options (media paths kept, in_segmentation "
                    "still ray-cast), several times faster; for the pose tasks (bsp-convert "
                    "--no-media)")
+    p.add_argument("--bone-length-variation", type=float, metavar="V", help="scale each "
+                   "walker's bone offsets by a seeded factor in [1-V, 1+V], V < 0.5 (default 0: "
+                   "the profiles' reference skeletons exactly; overrides "
+                   "bone_length_variation); changes no other random draw")
     p.add_argument("--force", action="store_true", help="replace OUT_DIR if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     return p
@@ -103,7 +107,8 @@ def _generate(args, client) -> int:
                            size=args.size, fov=args.fov, seed=args.seed, workers=args.workers,
                            config=args.config, motion=args.motion,
                            apng_drop_duplicates=args.apng_drop_duplicates,
-                           poses_only=args.poses_only, force=args.force,
+                           poses_only=args.poses_only,
+                           bone_length_variation=args.bone_length_variation, force=args.force,
                            progress=not args.quiet, client=client)
     except FileExistsError as e:
         print(f"bsp-synth: {e}", file=sys.stderr)

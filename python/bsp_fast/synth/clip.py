@@ -64,6 +64,17 @@ def clip_rngs(seed: int, index: int, batch_size: int):
             np.random.default_rng(look))
 
 
+def bone_scale(cfg: SynthConfig, index: int) -> float:
+    """The walker's bone-length factor of clip ``index``: 1 without
+    ``bone_length_variation``, else uniform in [1 - v, 1 + v], from a stream of its own
+    (so the variation changes no other random draw of the clip)."""
+    v = cfg.bone_length_variation
+    if not v:
+        return 1.0
+    rng = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(2, index)))
+    return float(1.0 + v * rng.uniform(-1.0, 1.0))
+
+
 def clip_id(rng: np.random.Generator) -> str:
     """``<uuid4>-0`` from 16 seeded random bytes."""
     return f"{uuid.UUID(bytes=rng.bytes(16), version=4)}-0"
@@ -93,10 +104,11 @@ def plan_clip(cfg: SynthConfig, index: int, motion=None) -> ClipPlan:
     look = st.to_world(pl.look_at_sw[0], pl.look_at_sw[1], 0.0)
     cam = scene.look_at_camera(look, pl.lane_heading, np.array(offset))
     style = gait.GaitStyle.sample(rng)
+    scale = bone_scale(cfg, index)
     if motion is None:
-        rel = gait.walk(stem, speed, F, cfg.fps, style)
+        rel = gait.walk(stem, speed, F, cfg.fps, style, scale)
     else:
-        rel = motion.relative_poses(stem, F, cfg.fps, phase=style.phase)
+        rel = motion.relative_poses(stem, F, cfg.fps, phase=style.phase, scale=scale)
     model = "walker.pedestrian." + str(rng.choice(MODELS[(prof.age, prof.gender)]))
     tick = int(rng.integers(2_000, 400_000))
     return ClipPlan(index, cid, prof, model, stem, speed, st, pl, path, cam, rel, tick,

@@ -87,6 +87,9 @@ class SynthConfig:
     # data.csv only (media paths recorded, no MP4/APNG written); data.csv is byte-identical
     # to the full mode's: it changes no random draw.
     poses_only: bool = False
+    # each walker's bone offsets scaled by a seeded factor in [1 - v, 1 + v] (0: every walker
+    # has its profile's reference skeleton exactly); data.csv stays self-consistent
+    bone_length_variation: float = 0.0
     video_bitrate: int = 1_000_000
     video_preset: str = "veryfast"
     motion: str | None = None  # BVH / FBX / glTF file driving the body instead of the gait
@@ -125,6 +128,7 @@ class SynthConfig:
             "look_at_shift": list(self.look_at_shift),
             "apng_drop_duplicates": self.apng_drop_duplicates,
             "poses_only": self.poses_only,
+            "bone_length_variation": self.bone_length_variation,
             "video": {"codec": "h264", "pix_fmt": "yuv420p", "bitrate": self.video_bitrate,
                       "preset": self.video_preset},
             "segmentation": {"format": "apng", "palette": "cityscapes", "indices": "carla"},
@@ -215,7 +219,8 @@ _YAML_KEYS = {"number_of_clips", "clip_length_in_frames", "pedestrian_distributi
               "camera_image_size", "batch_size", "seed", "crossing_probability",
               "waypoint_radius", "parallel_max_distance", "look_at_shift",
               "apng_drop_duplicates", "outputs_dir", "overwrite", "failure_multiplier",
-              "waypoint_jitter_scale", "video_preset", "video_bitrate", "poses_only"}
+              "waypoint_jitter_scale", "video_preset", "video_bitrate", "poses_only",
+              "bone_length_variation"}
 X264_PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow",
                 "slower", "veryslow")
 
@@ -302,6 +307,10 @@ def make_config(preset: str = "sample", overrides: dict | None = None) -> SynthC
     for k in ("waypoint_radius", "parallel_max_distance"):
         if k in opts and not float(opts[k]) >= 0:
             raise ValueError(f"{k}: expected a non-negative number, got {opts[k]!r}")
+    v = opts.get("bone_length_variation", 0.0)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v < 0.5:
+        raise ValueError(f"bone_length_variation: expected a number in [0, 0.5), got {v!r}")
+    opts["bone_length_variation"] = float(v)
     if not isinstance(opts.get("poses_only", False), bool):
         raise ValueError(f"poses_only: expected true or false, got {opts['poses_only']!r}")
     if opts.get("video_preset", "veryfast") not in X264_PRESETS:

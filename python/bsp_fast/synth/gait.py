@@ -87,9 +87,13 @@ class GaitStyle:
                          phase=rng.uniform(0, 2 * np.pi))
 
 
-def reference(stem: str):
-    """T-pose relative (26, 6), component (26, 6) and component rotations (26, 3, 3)."""
+def reference(stem: str, scale: float = 1.0):
+    """T-pose relative (26, 6), component (26, 6) and component rotations (26, 3, 3).
+    ``scale`` multiplies every bone offset (joints 1..25; the root stays at the actor's
+    origin): a walker whose bones are that much longer than the reference skeleton's."""
     rel0 = np.array(sk.reference_pose(stem), float)
+    if scale != 1.0:
+        rel0[1:, :3] *= scale
     comp0 = forward_kinematics(rel0)
     return rel0, comp0, rotation_matrix(comp0[:, 3:])
 
@@ -102,9 +106,9 @@ def cadence(speed: float, hip_height: float) -> tuple:
 
 
 def gait_deltas(stem: str, speed: float, frames: int, fps: float,
-                style: GaitStyle) -> np.ndarray:
+                style: GaitStyle, scale: float = 1.0) -> np.ndarray:
     """Global body-axis deltas D (frames, 26, 3, 3) for a constant-speed walk."""
-    _, comp0, _ = reference(stem)
+    _, comp0, _ = reference(stem, scale)
     hip_h = comp0[J["crl_thigh__R"], 2]
     step, steps_per_s = cadence(speed, hip_h)
     t = np.arange(frames) / fps
@@ -140,9 +144,10 @@ def gait_deltas(stem: str, speed: float, frames: int, fps: float,
     return D
 
 
-def pose_from_deltas(stem: str, D: np.ndarray) -> np.ndarray:
-    """Relative poses (frames, 26, 6) from global deltas, feet kept on the ground."""
-    rel0, comp0, G0 = reference(stem)
+def pose_from_deltas(stem: str, D: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """Relative poses (frames, 26, 6) from global deltas, feet kept on the ground
+    (``scale``: bone lengths relative to the reference skeleton's)."""
+    rel0, comp0, G0 = reference(stem, scale)
     G = D @ G0
     parents = np.array(sk.PARENTS)
     rel_R = np.empty_like(G)
@@ -150,13 +155,13 @@ def pose_from_deltas(stem: str, D: np.ndarray) -> np.ndarray:
     rel_R[:, 1:] = np.swapaxes(G[:, parents[1:]], -1, -2) @ G[:, 1:]
     rel = np.broadcast_to(rel0, D.shape[:1] + rel0.shape).copy()
     rel[:, :, 3:] = rotation_to_euler(rel_R)
-    return ground_feet(stem, rel)
+    return ground_feet(stem, rel, scale)
 
 
-def _contact_z(stem: str, comp: np.ndarray) -> np.ndarray:
+def _contact_z(stem: str, comp: np.ndarray, scale: float = 1.0) -> np.ndarray:
     """Lowest contact point per frame: toes, toe tips and a heel point under each ankle."""
     R = rotation_matrix(comp[..., 3:])
-    _, comp0, G0 = reference(stem)
+    _, comp0, G0 = reference(stem, scale)
     zs = [comp[:, J[n], 2] for n in ("crl_toe__R", "crl_toe__L", "crl_toeEnd__R",
                                       "crl_toeEnd__L")]
     for side in ("R", "L"):
@@ -167,13 +172,13 @@ def _contact_z(stem: str, comp: np.ndarray) -> np.ndarray:
     return np.min(np.stack(zs, -1), axis=-1)
 
 
-def ground_feet(stem: str, rel: np.ndarray) -> np.ndarray:
+def ground_feet(stem: str, rel: np.ndarray, scale: float = 1.0) -> np.ndarray:
     """Shifts the hips (relative translation of joint 1) so the lowest contact point sits
     at its T-pose height in every frame."""
-    rel0, comp0, _ = reference(stem)
-    target = _contact_z(stem, comp0[None])[0]
+    rel0, comp0, _ = reference(stem, scale)
+    target = _contact_z(stem, comp0[None], scale)[0]
     comp = forward_kinematics(rel)
-    dz = target - _contact_z(stem, comp)
+    dz = target - _contact_z(stem, comp, scale)
     R_root = rotation_matrix(rel0[0, 3:])
     hips_mesh = R_root @ rel0[1, :3] + rel0[0, :3]
     shifted = hips_mesh[None, :] + dz[:, None] * np.array([0.0, 0.0, 1.0])
@@ -182,6 +187,8 @@ def ground_feet(stem: str, rel: np.ndarray) -> np.ndarray:
     return out
 
 
-def walk(stem: str, speed: float, frames: int, fps: float, style: GaitStyle) -> np.ndarray:
-    """Relative poses (frames, 26, 6) of a walk at `speed` m/s."""
-    return pose_from_deltas(stem, gait_deltas(stem, speed, frames, fps, style))
+def walk(stem: str, speed: float, frames: int, fps: float, style: GaitStyle,
+         scale: float = 1.0) -> np.ndarray:
+    """Relative poses (frames, 26, 6) of a walk at `speed` m/s (``scale``: bone lengths
+    relative to the reference skeleton's)."""
+    return pose_from_deltas(stem, gait_deltas(stem, speed, frames, fps, style, scale), scale)

@@ -56,7 +56,7 @@ def _append_part(out, part: str, header: bool) -> None:
 
 
 def _resolve(preset, clips, frames, size, fov, seed, config, motion,
-             apng_drop_duplicates, poses_only=False) -> SynthConfig:
+             apng_drop_duplicates, poses_only=False, bone_length_variation=None) -> SynthConfig:
     overrides = load_yaml_config(config) if config else {}
     cli = dict(number_of_clips=clips, clip_length_in_frames=frames, camera_image_size=size,
                camera_fov=fov, seed=seed)
@@ -65,6 +65,8 @@ def _resolve(preset, clips, frames, size, fov, seed, config, motion,
         overrides["apng_drop_duplicates"] = True
     if poses_only:
         overrides["poses_only"] = True
+    if bone_length_variation is not None:
+        overrides["bone_length_variation"] = bone_length_variation
     if motion is not None:
         path = os.path.abspath(os.fspath(motion))
         if not os.path.isfile(path):
@@ -108,7 +110,8 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
              frames: int | None = None, size=None, fov: float | None = None,
              seed: int | None = None, workers: int | None = None, config=None, motion=None,
              apng_drop_duplicates: bool = False, poses_only: bool = False,
-             force: bool = False, progress: bool = True, client=None) -> dict:
+             bone_length_variation: float | None = None, force: bool = False,
+             progress: bool = True, client=None) -> dict:
     """Generates a CARLA-BSP-format dataset under ``out_dir`` and returns a summary dict.
 
     preset: ``sample`` (20 clips x 150 frames, 640x240), ``medium`` or ``full`` (396 x 900,
@@ -127,6 +130,10 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
         CSV, ``clips/`` is not created. The pedestrian is still ray-cast against the street
         on the annotated frames to decide ``in_segmentation`` exactly; the video and
         segmentation encoders, nearly all of the time, are skipped.
+    bone_length_variation: v in [0, 0.5): each walker's bone offsets are scaled by a seeded
+        factor in [1 - v, 1 + v] (its own random stream: every other draw is unchanged), so
+        the reference skeletons of the (age, gender) profiles are no longer exact; the
+        CSV's relative, component and world poses stay consistent (an ablation knob).
     force: replace an existing ``out_dir``.
     client: a ``distributed.Client``: one Dask task per clip instead of worker processes
         (``workers`` is then ignored); ``out_dir`` must be on a filesystem the workers share.
@@ -147,7 +154,7 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
     if not isinstance(poses_only, bool):
         raise ValueError(f"poses_only: expected True or False, got {poses_only!r}")
     cfg = _resolve(preset, clips, frames, size, fov, seed, config, motion,
-                   apng_drop_duplicates, poses_only)
+                   apng_drop_duplicates, poses_only, bone_length_variation)
     n = cfg.number_of_clips
     if workers is None:
         workers = min(os.cpu_count() or 1, n)

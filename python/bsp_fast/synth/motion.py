@@ -221,13 +221,15 @@ class Motion:
             D[:, j] = min_rotation(v, u) @ D[:, j]
         return D
 
-    def relative_poses(self, stem: str, frames: int, fps: float, phase: float = 0.0):
-        """Relative poses (frames, 26, 6) looping the animation from a phase in [0, 2 pi)."""
+    def relative_poses(self, stem: str, frames: int, fps: float, phase: float = 0.0,
+                       scale: float = 1.0):
+        """Relative poses (frames, 26, 6) looping the animation from a phase in [0, 2 pi)
+        (``scale``: bone lengths relative to the reference skeleton's)."""
         if abs(fps - self.fps) > 1e-9:
             raise ValueError(f"motion sampled at {self.fps} fps, clip runs at {fps}")
         offset = int(phase / (2 * np.pi) * self.frames) % self.frames
         idx = (offset + np.arange(frames)) % self.frames
-        return gait.pose_from_deltas(stem, self.deltas(stem)[idx])
+        return gait.pose_from_deltas(stem, self.deltas(stem)[idx], scale)
 
 
 @functools.lru_cache(maxsize=2)
