@@ -155,3 +155,29 @@ def test_reference_hips_neck_matches_the_skeleton_module():
     ref = ReferenceSkeletons()
     for i, (age, gender) in enumerate(PROFILES):
         assert abs(ref.hips_neck[i].item() - sk.hips_neck_length(age, gender)) < 1e-6
+
+
+def test_direct_parameterisation_is_the_original_s():
+    """parameterisation="direct" (the original's, an ablation): the 6D output is the
+    relative rotation itself. A head forced to identity 6D then gives every bone the
+    identity rotation relative to its parent (FK of the bare offsets), not the T-pose; the
+    head keeps PyTorch's default initialisation; an unknown value is refused."""
+    profile = ("adult", "female")
+    model = create("lifting", "lstm_relative_rot", parameterisation="direct").eval()
+    assert not torch.allclose(model.head.bias[:6], torch.tensor([1.0, 0, 0, 0, 1, 0]))
+    with torch.no_grad():
+        model.head.weight.zero_()
+        model.head.bias.copy_(torch.tensor([1.0, 0, 0, 0, 1, 0]).repeat(26))
+    rel = np.array(sk.reference_pose(profile), float)
+    rel[:, 3:] = 0.0  # identity relative rotations, the reference bone offsets
+    comp = bsp_fast.forward_kinematics(rel, root=[0, 0, -0.9, 0, -90, 0])[:, :3]
+    ref = bsp_fast.forward_kinematics(sk.reference_pose(profile),
+                                      root=[0, 0, -0.9, 0, -90, 0])[:, :3]
+    hn = np.linalg.norm(ref[sk.NECK] - ref[sk.HIPS])  # the model divides by the reference's
+    want = (comp - comp[sk.HIPS]) / hn
+    with torch.no_grad():
+        out = model(torch.randn(1, 3, 26, 2), age=[profile[0]], gender=[profile[1]])
+    assert np.abs(out.numpy() - want).max() < 1e-5
+    assert np.abs(want - (ref - ref[sk.HIPS]) / hn).max() > 0.1  # not the T-pose
+    with pytest.raises(ValueError, match="parameterisation must be one of"):
+        create("lifting", "lstm_relative_rot", parameterisation="euler")

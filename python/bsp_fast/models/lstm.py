@@ -95,17 +95,28 @@ class LSTMRelativeRot(LiftingModel):
     Needs ``age`` and ``gender`` (lists of strings, one per clip) as context;
     :meth:`forward_batch` takes them from ``batch["meta"]``. Leaf joints (hands, eyes, toe
     ends) have rotations that move no joint, as in the original.
+
+    ``parameterisation="direct"`` is the original's (an ablation): the 6D output is the
+    relative rotation itself (``R = C``) and the head keeps PyTorch's default
+    initialisation, so training does not start at the reference T-pose.
     """
 
     context_keys = ("age", "gender")
+    PARAMETERISATIONS = ("reference", "direct")
 
-    def __init__(self, *, hidden_size: int = 64, num_layers: int = 2, use_visible: bool = False):
+    def __init__(self, *, hidden_size: int = 64, num_layers: int = 2, use_visible: bool = False,
+                 parameterisation: str = "reference"):
+        if parameterisation not in self.PARAMETERISATIONS:
+            raise ValueError(f"parameterisation must be one of {self.PARAMETERISATIONS}, "
+                             f"got {parameterisation!r}")
         super().__init__(locals())
         self._init_visible(use_visible)
+        self.direct = parameterisation == "direct"
         self.body = _LSTMBody(self.in_channels, hidden_size, num_layers)
         self.head = nn.Linear(hidden_size, J * 6)
-        with torch.no_grad():
-            self.head.bias.copy_(torch.tensor([1.0, 0, 0, 0, 1, 0]).repeat(J))
+        if not self.direct:  # start at the T-pose: C = identity for every joint
+            with torch.no_grad():
+                self.head.bias.copy_(torch.tensor([1.0, 0, 0, 0, 1, 0]).repeat(J))
         self.fk = ForwardKinematics()
         self.skeletons = ReferenceSkeletons()
         mesh = euler_to_matrix(torch.tensor([0.0, MESH_YAW, 0.0], dtype=torch.float64))
@@ -124,7 +135,10 @@ class LSTMRelativeRot(LiftingModel):
         y = torch.addmm(self.head.bias.unsqueeze(1), self.head.weight, h.reshape(B * L, -1).t())
         C = rotation_6d_to_matrix(y.view(J, 6, B, L), dim=1)  # (J, 3, 3, B, L), float32
         sk = self.skeletons
-        R = matmul3(sk.rotations[profile].permute(1, 2, 3, 0).unsqueeze(-1), C)
+        if self.direct:
+            R = C
+        else:
+            R = matmul3(sk.rotations[profile].permute(1, 2, 3, 0).unsqueeze(-1), C)
         offsets = sk.offsets[profile].permute(1, 2, 0).unsqueeze(-1)  # (J, 3, B, 1)
         pos = self.fk(R, offsets, self.mesh_rotation.view(3, 3, 1, 1), poses_last=True)
         pos = (pos - pos[_sk.HIPS:_sk.HIPS + 1]) / sk.hips_neck[profile].view(1, 1, B, 1)
