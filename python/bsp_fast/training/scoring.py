@@ -8,7 +8,10 @@
   ratio of the inputs (MJR);
 * lifting: the prediction is de-normalised with the hips-neck length of the clip's
   reference skeleton (age, gender) and its hips put on the target's hips, then MPJPE,
-  N-MPJPE, PA-MPJPE and MPJVE in mm on the frames the model predicts (``frame_slice``);
+  N-MPJPE, PA-MPJPE and MPJVE in mm on the frames the model predicts (``frame_slice``:
+  every frame, for every lifting model), and again on the centre frames
+  ``[CENTRE_MARGIN, L - CENTRE_MARGIN)`` (keys ``*_centre``: the frames the report scored
+  PoseFormer on, the same frames for every row); MPJVE in mm per frame;
 * pose_estimation: PCK@0.05 and PCKhn@0.1 in crop pixels over the visible joints.
 
 Every value is a global sum over the split divided by a global count (torchmetrics
@@ -21,10 +24,15 @@ import functools
 
 import torch
 
-__all__ = ["TaskMetrics", "hips_neck_lengths", "UNITS"]
+__all__ = ["TaskMetrics", "hips_neck_lengths", "UNITS", "CENTRE_MARGIN"]
 
 HIPS, NECK = 1, 8
-UNITS = {"mpjpe_mm": "mm", "n_mpjpe_mm": "mm", "pa_mpjpe_mm": "mm", "mpjve_mm": "mm",
+#: the report's PoseFormer (receptive field 9) scored frames [9 // 2, L - 9 // 2) only
+CENTRE_MARGIN = 4
+_LIFTING = ("mpjpe_mm", "n_mpjpe_mm", "pa_mpjpe_mm", "mpjve_mm")
+UNITS = {"mpjpe_mm": "mm", "n_mpjpe_mm": "mm", "pa_mpjpe_mm": "mm",
+         "mpjve_mm": "mm per frame",
+         **{f"{k}_centre": "mm per frame" if k == "mpjve_mm" else "mm" for k in _LIFTING},
          "pck_0.05": "fraction", "pckhn_0.1": "fraction", "mjr": "fraction",
          "f1": "fraction", "precision": "fraction", "recall": "fraction",
          "accuracy": "fraction"}
@@ -70,9 +78,10 @@ class TaskMetrics(torch.nn.Module):
             if task == "autoencoder":
                 self.scores["mjr"] = MeanMetric()
         elif task == "lifting":
-            self.scores = torch.nn.ModuleDict({
-                "mpjpe_mm": M.MPJPE(), "n_mpjpe_mm": M.NMPJPE(), "pa_mpjpe_mm": M.PAMPJPE(),
-                "mpjve_mm": M.MPJVE()})
+            kinds = {"mpjpe_mm": M.MPJPE, "n_mpjpe_mm": M.NMPJPE, "pa_mpjpe_mm": M.PAMPJPE,
+                     "mpjve_mm": M.MPJVE}
+            self.scores = torch.nn.ModuleDict(
+                {k + end: kinds[k]() for end in ("", "_centre") for k in _LIFTING})
         else:
             raise ValueError(f"task must be one of ['classification', 'autoencoder', "
                              f"'lifting', 'pose_estimation'], got {task!r}")
@@ -118,8 +127,14 @@ class TaskMetrics(torch.nn.Module):
         hips_neck = hips_neck_lengths(batch["meta"], device=output.device)
         pred_mm = M.denormalise_lifting(output, gt_m, hips_neck) * 1000.0
         gt_mm = gt_m * 1000.0
-        for key in ("mpjpe_mm", "n_mpjpe_mm", "pa_mpjpe_mm", "mpjve_mm"):
+        for key in _LIFTING:
             self.scores[key].update(pred_mm, gt_mm)
+        L = batch["targets_m"].shape[1]  # the centre frames, as indices of the output
+        lo = max(CENTRE_MARGIN, sl.start or 0) - (sl.start or 0)
+        hi = min(L - CENTRE_MARGIN, sl.stop if sl.stop is not None else L) - (sl.start or 0)
+        if hi - lo >= 2:  # MPJVE needs two frames
+            for key in _LIFTING:
+                self.scores[key + "_centre"].update(pred_mm[:, lo:hi], gt_mm[:, lo:hi])
 
     def compute(self) -> dict:
         out = {"loss": _scalar(self.loss) if self.loss.update_count else float("nan")}
