@@ -113,7 +113,8 @@ OPTIONS: tuple = (
        "with MASTER_ADDR, MASTER_PORT and NODE_RANK set, or under torchrun "
        "(docs/distributed.md)", "training", minimum=1, metavar="N"),
     _o("precision", "str", "auto", "arithmetic precision; auto = bf16-mixed on GPUs that "
-       "support it, 32 on CPU (see docs/training.md for the measurements)", "training",
+       "support it and, on CPUs with AVX512-BF16/AMX, for the models measured faster in "
+       "bf16 there; 32 otherwise (see docs/training.md for the measurements)", "training",
        choices=PRECISIONS),
     _o("limit_batches", "int", 0, "use at most this many batches of each split per epoch "
        "(0: all; for smoke tests - metrics then cover part of a split)", "training",

@@ -51,6 +51,9 @@ class TaskModule(pl.LightningModule):
         self.val_metrics = TaskMetrics(self.task)
         self.test_metrics = TaskMetrics(self.task)
         self.results: dict = {}  # the last computed {"val": {...}, "test": {...}}
+        from .breakdown import RecordingBreakdown
+
+        self.test_recordings = RecordingBreakdown(self.task)  # -> test_per_recording.json
 
     def forward(self, batch: dict) -> torch.Tensor:
         return self.net.forward_batch(batch)
@@ -65,16 +68,18 @@ class TaskModule(pl.LightningModule):
                  on_epoch=False, batch_size=n)
         return loss
 
-    def _eval_step(self, batch: dict, metrics: TaskMetrics) -> None:
+    def _eval_step(self, batch: dict, metrics: TaskMetrics) -> torch.Tensor:
         output = self.net.forward_batch(batch)
         metrics.update_loss(self.net.loss(output, batch), _batch_size(batch))
         metrics.update(output, batch, self.net)
+        return output
 
     def validation_step(self, batch: dict, batch_idx: int) -> None:
         self._eval_step(batch, self.val_metrics)
 
     def test_step(self, batch: dict, batch_idx: int) -> None:
-        self._eval_step(batch, self.test_metrics)
+        output = self._eval_step(batch, self.test_metrics)
+        self.test_recordings.update(output.detach().float(), batch, self.net)
 
     def predict_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
         return self.net.forward_batch(batch)
@@ -103,6 +108,8 @@ class TaskModule(pl.LightningModule):
 
     def on_test_epoch_end(self) -> None:
         self._log_metrics("test", self.test_metrics)
+        self.results["test_per_recording"] = self.test_recordings.compute()
+        self.test_recordings.reset()
 
     # ------------------------------------------------------------------ optimiser
     def configure_optimizers(self):
@@ -168,14 +175,16 @@ def load_module(ckpt_path, task: str | None = None, map_location="cpu") -> TaskM
 
 @torch.no_grad()
 def initial_metrics(task: str, train_loader, eval_loaders: dict, limit: int = 0,
-                    model=None) -> dict:
+                    model=None, per_recording: bool = False) -> dict:
     """Fits ``bsp_fast.models.trivial_baseline(task)`` on the train batches and scores it
     like a trained model on each of ``eval_loaders`` (``{split: loader}``):
     ``{"baseline": name, split: {metric: value}}``. ``limit`` > 0 caps the batches read.
-    ``model`` (the model about to be trained) gets ``init_from_baseline(baseline)``."""
+    ``model`` (the model about to be trained) gets ``init_from_baseline(baseline)``.
+    ``per_recording`` adds ``"test_per_recording"`` (:mod:`.breakdown`) for the test split."""
     import itertools
 
     from .. import models
+    from .breakdown import RecordingBreakdown
 
     base = models.trivial_baseline(task)
     base.eval()
@@ -186,9 +195,14 @@ def initial_metrics(task: str, train_loader, eval_loaders: dict, limit: int = 0,
     out = {"baseline": BASELINES[task]}
     for split, loader in eval_loaders.items():
         metrics = TaskMetrics(task)
+        recordings = RecordingBreakdown(task) if per_recording and split == "test" else None
         for batch in cap(iter(loader)):
             output = base.forward_batch(batch)
             metrics.update_loss(base.loss(output, batch), _batch_size(batch))
             metrics.update(output, batch, base)
+            if recordings is not None:
+                recordings.update(output.float(), batch, base)
         out[split] = metrics.compute()
+        if recordings is not None:
+            out["test_per_recording"] = recordings.compute()
     return out

@@ -129,14 +129,18 @@ def prepare_data(dm, stages=("fit", "test"), convert: bool = True) -> None:
 
 
 # ---------------------------------------------------------------------- trainer
-def resolve_precision(precision: str, accelerator: str) -> str:
-    """``auto`` -> bf16-mixed on a GPU that supports it, else 32 (CPU: see docs)."""
+def resolve_precision(precision: str, accelerator: str, model=None) -> str:
+    """``auto`` -> bf16-mixed on a GPU that supports it; on a CPU with native bf16
+    (AVX512-BF16/AMX) bf16-mixed for a ``model`` (class or instance) whose
+    ``cpu_bf16_faster`` is set (measured faster there); else 32 (docs/training.md)."""
     if precision != "auto":
         return precision
     import torch
 
     gpu = accelerator == "gpu" or (accelerator == "auto" and torch.cuda.is_available())
     if gpu and torch.cuda.is_available() and torch.cuda.is_bf16_supported():
+        return "bf16-mixed"
+    if not gpu and getattr(model, "cpu_bf16_faster", False) and native_bf16("cpu"):
         return "bf16-mixed"
     return "32"
 
@@ -258,7 +262,10 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
     child = bool(os.environ.get(ENV_TMP)) and max(_rank(), started) > 0
     if cfg["threads"]:
         torch.set_num_threads(cfg["threads"])
-    precision = resolve_precision(cfg["precision"], cfg["accelerator"])
+    from ..models import model_class
+
+    precision = resolve_precision(cfg["precision"], cfg["accelerator"],
+                                  model_class(cfg["task"], cfg["model"]))
     dm = make_datamodule(cfg)
     prepare_data(dm, convert=not child)
     pl.seed_everything(cfg["seed"], workers=True, verbose=False)
@@ -319,7 +326,7 @@ def _initial(cfg: dict, dm, model=None) -> dict:
 
     loaders = {"val": dm.val_dataloader(), "test": dm.test_dataloader()}
     return initial_metrics(cfg["task"], dm.train_dataloader(), loaders,
-                           limit=cfg["limit_batches"], model=model)
+                           limit=cfg["limit_batches"], model=model, per_recording=True)
 
 
 def _log_initial(trainer, initial: dict, quiet: bool) -> None:
@@ -342,6 +349,11 @@ def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds):
     from .scoring import UNITS
 
     test = dict(trainer.lightning_module.results.get("test", {}))
+    from .breakdown import write_breakdown
+
+    initial = dict(initial)  # the per-recording sums go to their own file, not metrics.json
+    write_breakdown(tmp, cfg["task"], trainer.lightning_module.results.get("test_per_recording"),
+                    initial.pop("test_per_recording", None))
     logs = read_logs(tmp)
     val_loss = logs.get("val/loss", {})
     best_epoch = min(val_loss, key=val_loss.get) if val_loss else None
