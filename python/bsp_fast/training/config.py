@@ -95,6 +95,8 @@ OPTIONS: tuple = (
        minimum=0.0),
     # ------------------------------------------------------------------ training
     _o("epochs", "int", 30, "maximum number of epochs", "training", minimum=1),
+    _o("max_steps", "int", 0, "maximum number of optimiser updates (0: no cap; --epochs "
+       "still applies)", "training", minimum=0, metavar="N"),
     _o("batch_size", "int", 256, "clips per batch (per process with DDP)", "training",
        minimum=1),
     _o("early_stop", "int", 0, "stop after this many epochs without a better val loss "

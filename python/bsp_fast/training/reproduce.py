@@ -78,6 +78,9 @@ def load_table(table) -> dict:
             raise ValueError(f"{path}: finding {f.get('text')!r}: metric {f.get('metric')!r} "
                              f"is not one of {list(doc['metrics'])}")
     doc["path"] = str(path)
+    from .seeds import check_budget_rule
+
+    check_budget_rule(doc)
     return doc
 
 
@@ -349,6 +352,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dry-run", action="store_true",
                    help="write the per-row bsp-train configs and print the commands only")
     p.add_argument("--verbose", action="store_true", help="bsp-train's progress bars and tables")
+    from .seeds import add_options
+
+    add_options(p)  # --seeds, --split-seeds, --jobs
     return p
 
 
@@ -358,6 +364,10 @@ def main(argv=None) -> int:
         tab = load_table(ns.table)
         overrides = C.parse_hp(ns.set)
         rows = [r.strip() for r in ns.rows.split(",") if r.strip()] if ns.rows else None
+        if ns.seeds != 1 or ns.split_seeds:
+            from .evidence import main_seeds
+
+            return main_seeds(tab, ns, rows, overrides)
         res = reproduce(tab, ns.data, ns.budget, ns.out, rows=rows, overrides=overrides,
                         force=ns.force, quiet=not ns.verbose, dry_run=ns.dry_run)
     except (C.ConfigError, ValueError) as exc:

@@ -229,7 +229,8 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
                                            patience=cfg["early_stop"]))
         return pl.Trainer(devices=cfg["devices"], strategy=cfg["strategy"],
                           num_nodes=cfg.get("num_nodes") or 1,
-                          max_epochs=cfg["epochs"], logger=loggers, callbacks=callbacks,
+                          max_epochs=cfg["epochs"], max_steps=cfg.get("max_steps") or -1,
+                          logger=loggers, callbacks=callbacks,
                           default_root_dir=str(tmp), log_every_n_steps=50, **common)
     except C.ConfigError:
         raise
