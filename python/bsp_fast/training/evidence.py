@@ -118,7 +118,7 @@ def _finding(tab, f, sums: _Sums, have) -> tuple:
     if k == "order":
         for a, b in zip(f["rows"], f["rows"][1:]):
             pieces.append((f"{a} − {b}", [(a, m, False), (b, m, False)],
-                           lambda v: sign * (v[0] - v[1]), 1))
+                           lambda v: v[0] - v[1], sign))
     elif k == "compare":
         off, side = _relation(f.get("relation", ">="), f.get("margin", 0.0))
         pieces.append((f"{f['a']} − {f['b']}" + (f" {off:+g}" if off else ""),
@@ -138,12 +138,13 @@ def _finding(tab, f, sums: _Sums, have) -> tuple:
     elif k == "fails":
         base = "f1_constant" if f.get("baseline") == "constant" else m
         margin = f.get("margin", 0.0)
-        pieces.append((f"{f['row']} − trivial", [(f["row"], m, False), (f["row"], base, True)],
+        pieces.append((f"{f['row']} − (trivial {margin:+g})",
+                       [(f["row"], m, False), (f["row"], base, True)],
                        lambda v: sign * (v[0] - v[1]) - margin, -1))
     else:  # beats_initial
         for r in f["rows"]:
             pieces.append((f"{r} − trivial", [(r, m, False), (r, m, True)],
-                           lambda v: sign * (v[0] - v[1]), 1))
+                           lambda v: v[0] - v[1], sign))
     if any(row not in have for _, parts, _, _ in pieces for row, _, _ in parts):
         return "rows not run", "n/a", None
     texts, marks, first = [], [], None

@@ -253,7 +253,8 @@ def _val_series(run_dir: Path, metric: str) -> dict:
             for row in csv.DictReader(fh):
                 text, step = row.get(f"val/{metric}"), row.get("step")
                 if text not in (None, "") and step not in (None, ""):
-                    out[int(float(step))] = float(text)
+                    # Lightning logs epoch-end values at the index of the last update
+                    out[int(float(step)) + 1] = float(text)
     return out
 
 
