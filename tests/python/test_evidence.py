@@ -319,3 +319,24 @@ def test_full_budget_rows_run_two_batches_on_the_cpu(table, data, tmp_path):
     for name, r in res["results"].items():
         first = next(iter(tab["metrics"]))
         assert r["metrics"].get(first) is not None, name
+
+
+def test_split_seeds_set_the_converters_split_seed(tmp_path, capsys):
+    from bsp_testdata import recording, write_dataset
+
+    rows = [r for i in range(10) for r in recording(f"rec{i:02d}", range(48), seed=i)]
+    ds = write_dataset(tmp_path / "ds", rows)
+    argv = ["lifting", "--data", str(ds), "--budget", "smoke", "--out", str(tmp_path / "o"),
+            "--rows", "lstm", "--seeds", "2", "--split-seeds", "--jobs", "1"]
+    assert R.main(argv) == 0
+    saved = json.loads((tmp_path / "o" / "lifting-smoke" / "results.json").read_text())
+    assert saved["split_seeds"] is True
+    tests = {}
+    for seed, one in saved["results"]["lstm"]["seeds"].items():
+        cfg = (tmp_path / "o" / "lifting-smoke" / "configs" / f"lstm-seed-{seed}.yaml").read_text()
+        assert f"split_seed: {seed}" in cfg and f"seed: {seed}" in cfg
+        tests[seed] = json.loads(open(one["per_recording"]).read())["test"]["recordings"]
+    # the converter assigns recordings to splits by their clip counts (deterministic);
+    # split_seed shuffles the clips inside each split: the same test recordings
+    assert tests["22742"] == tests["22743"]
+    capsys.readouterr()

@@ -225,7 +225,7 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
             f"{s['best_epoch']}/{s['epochs']}" for s in r["seeds"].values()))
         rows.append(cells)
     n = len(res.get("seeds") or [])
-    split = "varied with the seed" if res.get("split_seeds") else "fixed"
+    split = "seed varied with the seed" if res.get("split_seeds") else "fixed"
     text = [f"### {tab['title']} — budget {res['budget']}, {n} seeds (split {split})", "",
             f"Cells: mean ± std over seeds [95 % interval, bootstrap over test recordings]. "
             f"Rule: {tab.get('budget_rule', '').strip()}", "", _md(header, rows), "",

@@ -66,8 +66,9 @@ def add_options(p) -> None:
                         "test recordings, findings are marked by a paired bootstrap "
                         "(default: 1, the single-run table)")
     p.add_argument("--split-seeds", action="store_true",
-                   help="with --seeds: vary the recording split with the seed too (needs a "
-                        "dataset directory; default: the split is fixed)")
+                   help="with --seeds: set the converter's split seed to the seed too (needs "
+                        "a dataset directory; it shuffles the clips inside each split, the "
+                        "recordings of each split stay the same; default: fixed)")
     p.add_argument("--jobs", type=int, default=None, metavar="N",
                    help="with --seeds: runs trained at once, one process and one torch "
                         "thread each (default: the number of cores)")
