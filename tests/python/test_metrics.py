@@ -51,6 +51,7 @@ def ref_mpjpe(p, g):
 def ref_n_mpjpe(p, g):
     errs = []
     for a, b in zip(p.reshape(-1, *p.shape[-2:]), g.reshape(-1, *g.shape[-2:])):
+        a, b = a - a[sk.HIPS], b - b[sk.HIPS]  # root-relative, each about its own hips
         s = np.sum(a * b) / np.sum(a * a)
         errs += [np.linalg.norm(s * a[j] - b[j]) for j in range(len(a))]
     return np.mean(errs)
@@ -117,7 +118,9 @@ def test_similarity_transform_gives_zero_pa_and_hand_worked_n_mpjpe():
     # 26 joints on a circle of radius r in the x-z plane; prediction = c * R_y(theta) x
     # + t with t along y (the rotation axis). By hand:
     #   MPJPE^2   = r^2 (c^2 - 2 c cos(theta) + 1) + |t|^2
-    #   N-MPJPE^2 = r^2 - c^2 cos^2(theta) r^4 / (c^2 r^2 + |t|^2)   (s = c cos r^2 / ...)
+    #   N-MPJPE: root-relative v_j = x_j - x_hips (t cancels), s = cos(theta) / c, joint
+    #   error |cos(theta) R v - v| = sin(theta) |v_j| with |v_j| = 2 r |sin((phi_j -
+    #   phi_hips) / 2)|: N-MPJPE = sin(theta) * mean_j 2 r |sin((phi_j - phi_hips) / 2)|
     r, c, theta, ty = 100.0, 1.5, 30.0, 40.0
     phi = 2 * np.pi * np.arange(J) / J
     gt = np.stack([r * np.cos(phi), np.zeros(J), r * np.sin(phi)], -1)
@@ -125,8 +128,9 @@ def test_similarity_transform_gives_zero_pa_and_hand_worked_n_mpjpe():
     cos = np.cos(np.deg2rad(theta))
     assert M.mpjpe(pred, gt) == pytest.approx(math.sqrt(r * r * (c * c - 2 * c * cos + 1)
                                                         + ty * ty), rel=1e-12)
+    chord = 2 * r * np.abs(np.sin((phi - phi[sk.HIPS]) / 2))
     assert M.n_mpjpe(pred, gt) == pytest.approx(
-        math.sqrt(r * r - c * c * cos * cos * r ** 4 / (c * c * r * r + ty * ty)), rel=1e-12)
+        np.sin(np.deg2rad(theta)) * chord.mean(), rel=1e-12)
     assert M.pa_mpjpe(pred, gt) == pytest.approx(0, abs=1e-9)
     # a real pose under a random similarity: PA-MPJPE 0 as well, N-MPJPE does not undo it
     rng = np.random.default_rng(3)

@@ -218,8 +218,9 @@ def test_bad_input_shapes_raise():
         m(torch.zeros(2, 8, 25, 2))
     with pytest.raises(ValueError, match="visible must be a"):
         m(torch.zeros(2, 8, 26, 2), torch.ones(2, 8, 25, dtype=torch.bool))
-    with pytest.raises(ValueError, match="at least 9 frames"):
-        models.create("lifting", "poseformer", **SMALL["poseformer"])(torch.zeros(1, 8, 26, 2))
+    # PoseFormer pads short clips at their edges: 8 frames in, 8 predicted
+    assert models.create("lifting", "poseformer", **SMALL["poseformer"])(
+        torch.zeros(1, 8, 26, 2)).shape == (1, 8, 26, 3)
     with pytest.raises(ValueError, match=r"\(B, L, 3, S, S\)"):
         models.create("pose_estimation", "pose_cnn")(torch.zeros(1, 2, 26, 2))
     with pytest.raises(ValueError, match="needs age and gender"):
@@ -233,11 +234,16 @@ def test_poseformer_predicts_each_frame_from_the_window_centred_on_it():
     torch.manual_seed(0)
     m = models.create("lifting", "poseformer", **SMALL["poseformer"]).eval()
     x, _ = make_inputs("lifting", 2, 13)
-    assert m.frame_slice(13) == slice(4, 9)
+    assert m.frame_slice(13) == slice(0, 13) and m.centre_slice(13) == slice(4, 9)
     with torch.no_grad():
         out = m(x)
-        for k in range(5):  # output k = frame 4 + k = the window [k, k + 9)
-            torch.testing.assert_close(out[:, k], m(x[:, k:k + 9])[:, 0], atol=1e-5, rtol=1e-5)
+        assert out.shape == (2, 13, 26, 3)
+        # the clip padded by replicating its first/last frame 4 times: frame t = the
+        # window [t, t + 9) of the padded clip, its centre frame (index 4 of a 9-frame clip)
+        padded = torch.cat([x[:, :1].expand(2, 4, 26, 2), x, x[:, -1:].expand(2, 4, 26, 2)], 1)
+        for t in range(13):
+            torch.testing.assert_close(out[:, t], m(padded[:, t:t + 9])[:, 4], atol=1e-5,
+                                       rtol=1e-5)
 
 
 def test_simple_transformer_is_frame_order_equivariant_without_encoding():

@@ -73,7 +73,8 @@ def test_train_writes_a_complete_run(runs, task):
     res = runs[task]
     run = res.run_dir
     assert sorted(p.name for p in run.iterdir()) == ["checkpoints", "config.yaml", "curves.png",
-                                                    "logs", "metrics.json"]
+                                                    "logs", "metrics.json",
+                                                    "test_per_recording.json"]
     assert not [p for p in run.parent.iterdir() if p.name.startswith(".")]  # no temporaries
     saved = json.loads((run / "metrics.json").read_text())
     assert set(saved["test"]) == KEYS[task] and saved["test"] == res.metrics

@@ -41,11 +41,16 @@ def mpjpe(pred, gt):
     return ratio(Kind(pred, gt), *mpjpe_sums(pred, gt))
 
 
-def n_mpjpe_sums(pred, gt):
+def n_mpjpe_sums(pred, gt, root: int = HIPS):
     """(sum of joint errors, number of joints) for :func:`n_mpjpe`."""
     s = check_pair(pred, gt, 3, POSES)
+    expect(-s[-2] <= root < s[-2], "root", f"a joint index in [0, {s[-2]})", root)
     kind = Kind(pred, gt)
     p, g = kind.f64(pred), kind.f64(gt)
+    # root-relative first (each pose minus its own root): a scale fitted about any other
+    # origin also absorbs part of the translation
+    p = p - p[..., root:root + 1, :]
+    g = g - g[..., root:root + 1, :]
     num, den = (p * g).sum((-1, -2)), (p * p).sum((-1, -2))
     xp = kind.xp
     scale = xp.where(den > 0, num / xp.where(den > 0, den, 1.0), 1.0)
@@ -53,11 +58,12 @@ def n_mpjpe_sums(pred, gt):
     return kind.sum(err), int(np.prod(s[:-1]))
 
 
-def n_mpjpe(pred, gt):
-    """MPJPE after scaling each frame's prediction by the least-squares factor
-    ``s = sum <pred_j, gt_j> / sum |pred_j|^2`` (no translation, no rotation). An all-zero
-    predicted frame keeps s = 1."""
-    return ratio(Kind(pred, gt), *n_mpjpe_sums(pred, gt))
+def n_mpjpe(pred, gt, root: int = HIPS):
+    """MPJPE of root-relative poses (each minus its own joint ``root``, default the hips,
+    as VideoPose3D evaluates) after scaling each frame's prediction by the least-squares
+    factor ``s = sum <pred_j, gt_j> / sum |pred_j|^2`` (no rotation). An all-zero
+    root-relative predicted frame keeps s = 1."""
+    return ratio(Kind(pred, gt), *n_mpjpe_sums(pred, gt, root))
 
 
 def pa_mpjpe_sums(pred, gt, chunk: int | None = None):

@@ -64,6 +64,10 @@ class BaseModel(nn.Module):
     default_weight_decay: float = 1e-8
     #: does forward need the batch's per-clip context (e.g. age/gender)?
     context_keys: tuple = ()
+    #: ``--precision auto`` on a CPU with native bf16 (AVX512-BF16 or AMX): bf16-mixed where
+    #: measured faster for this model (docs/training.md, "Precision"), float32 otherwise;
+    #: the one place that per-model decision lives
+    cpu_bf16_faster: bool = False
 
     def __init__(self, values: dict | None = None):
         super().__init__()

@@ -29,7 +29,7 @@ class _LSTMBody(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         x = x.flatten(2)
-        if x.device.type == "cpu" and torch.is_autocast_enabled("cpu") and not _cpu_bf16():
+        if x.device.type == "cpu" and torch.is_autocast_enabled("cpu") and not cpu_bf16():
             # oneDNN has no bf16 LSTM without CPU bf16 support ("could not create a
             # primitive descriptor"): run this layer in float32 there
             with torch.autocast("cpu", enabled=False):
@@ -38,7 +38,7 @@ class _LSTMBody(nn.Module):
 
 
 @functools.lru_cache(maxsize=None)
-def _cpu_bf16() -> bool:
+def cpu_bf16() -> bool:
     """Whether oneDNN runs bf16 kernels on this CPU (AVX512-BF16 / AMX)."""
     try:
         return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())

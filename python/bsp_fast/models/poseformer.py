@@ -66,7 +66,7 @@ class Block(nn.Module):
 
 @register("lifting", "poseformer",
           "PoseFormer, receptive field 9: spatial transformer (dim 32) per frame, temporal "
-          "transformer (dim 832) per window, centre-frame 3D pose")
+          "transformer (dim 832) per window, centre-frame 3D pose; clip edges padded")
 class PoseFormer(LiftingModel):
     """Spatial transformer over the 26 joint tokens of a frame (``Linear(2 -> 32)`` + a
     learned joint embedding, ``depth`` blocks, 8 heads, MLP ratio 2), flattened to one
@@ -75,10 +75,13 @@ class PoseFormer(LiftingModel):
     ``Conv1d(R -> 1, k=1)`` over the window; head ``LayerNorm -> Linear(832 -> 78)``: the 3D
     pose of the window's centre frame.
 
-    Over a clip of L frames, frame t is predicted from the window centred on it, for the
-    frames ``frame_slice(L) = [R//2, L - R//2)``. The spatial transformer runs once per
-    frame and its features are shared by the windows (identical results to running it per
-    window: it sees one frame at a time). ``AdamW(4e-4, weight_decay 0.1)`` and
+    Over a clip of L frames, frame t is predicted from the window centred on it; the clip
+    is padded at its edges by replicating its first and last frame ``R//2`` times (as
+    VideoPose3D does at test time), so every frame of the clip is predicted and scored like
+    every other model's. ``centre_slice(L) = [R//2, L - R//2)`` are the frames whose window
+    needs no padding (the only frames the original scored). The spatial transformer runs
+    once per frame and the padding replicates its features, identical to padding the 2D
+    input (it sees one frame at a time). ``AdamW(4e-4, weight_decay 0.1)`` and
     ``ExponentialLR(0.99)`` per epoch.
     """
 
@@ -105,7 +108,6 @@ class PoseFormer(LiftingModel):
             check_float(name, locals()[name], 0.0, 1.0, hi_open=True)
         self._init_visible(use_visible)
         self.receptive_field = R = receptive_field
-        self.min_length = R
         c, d = embed_dim_ratio, embed_dim_ratio * J
         self.spatial_embed = nn.Linear(self.in_channels, c)
         self.spatial_pos = nn.Parameter(torch.zeros(1, J, c))
@@ -121,9 +123,10 @@ class PoseFormer(LiftingModel):
         self.weighted_mean = nn.Conv1d(R, 1, kernel_size=1)
         self.head = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, J * 3))
 
-    def frame_slice(self, L: int) -> slice:
+    def centre_slice(self, L: int) -> slice:
+        """The frames of an L-frame clip whose receptive window lies inside the clip."""
         h = self.receptive_field // 2
-        return slice(h, L - h)
+        return slice(min(h, L), max(min(h, L), L - h))
 
     def compute(self, inputs, visible):
         x = self.pose_features(inputs, visible)
@@ -134,14 +137,15 @@ class PoseFormer(LiftingModel):
         for blk in self.spatial_blocks:
             s = blk(s)
         f = self.spatial_norm(s).reshape(B, L, -1)  # (B, L, J*c)
+        h = R // 2  # edge padding: the first / last frame replicated
+        f = torch.cat([f[:, :1].expand(B, h, -1), f, f[:, -1:].expand(B, h, -1)], 1)
         # temporal: one window of R frames per predicted frame
-        W = L - R + 1
-        t = f.unfold(1, R, 1).transpose(2, 3).reshape(B * W, R, -1)
+        t = f.unfold(1, R, 1).transpose(2, 3).reshape(B * L, R, -1)
         t = self.pos_drop(t + self.temporal_pos)
         for blk in self.temporal_blocks:
             t = blk(t)
-        t = self.weighted_mean(self.temporal_norm(t))  # (B*W, 1, d)
-        return self.head(t).view(B, W, J, 3)
+        t = self.weighted_mean(self.temporal_norm(t))  # (B*L, 1, d)
+        return self.head(t).view(B, L, J, 3)
 
     def scheduler(self, optimizer):
         return torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=0.99), "epoch"

@@ -95,6 +95,8 @@ OPTIONS: tuple = (
        minimum=0.0),
     # ------------------------------------------------------------------ training
     _o("epochs", "int", 30, "maximum number of epochs", "training", minimum=1),
+    _o("max_steps", "int", 0, "maximum number of optimiser updates (0: no cap; --epochs "
+       "still applies)", "training", minimum=0, metavar="N"),
     _o("batch_size", "int", 256, "clips per batch (per process with DDP)", "training",
        minimum=1),
     _o("early_stop", "int", 0, "stop after this many epochs without a better val loss "
@@ -113,7 +115,8 @@ OPTIONS: tuple = (
        "with MASTER_ADDR, MASTER_PORT and NODE_RANK set, or under torchrun "
        "(docs/distributed.md)", "training", minimum=1, metavar="N"),
     _o("precision", "str", "auto", "arithmetic precision; auto = bf16-mixed on GPUs that "
-       "support it, 32 on CPU (see docs/training.md for the measurements)", "training",
+       "support it and, on CPUs with AVX512-BF16/AMX, for the models measured faster in "
+       "bf16 there; 32 otherwise (see docs/training.md for the measurements)", "training",
        choices=PRECISIONS),
     _o("limit_batches", "int", 0, "use at most this many batches of each split per epoch "
        "(0: all; for smoke tests - metrics then cover part of a split)", "training",

@@ -85,7 +85,7 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
         torch.set_num_threads(cfg["threads"])
     dm = make_datamodule(cfg, h5)
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
-    precision = resolve_precision(cfg["precision"], cfg["accelerator"])
+    precision = resolve_precision(cfg["precision"], cfg["accelerator"], module.net)
     if precision.startswith("bf16") and not native_bf16(cfg["accelerator"]):
         precision = "32"  # e.g. a bf16 GPU run evaluated on a CPU without bf16 instructions
     trainer = make_trainer(cfg, None, precision, fit=False)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -20,112 +19,16 @@ from pathlib import Path
 from . import config as C
 from ..atomic import write_text
 from .runs import RunError, read_run
+from .findings import NA, NO, YES, evaluate_findings, format_value
+from .table_files import (BUDGETS, KINDS, RELATIONS, TABLES, experiments_dir, experiments_dirs,
+                          load_table, row_options)
 from .tasks import get_task
-from .tasks.classification import constant_f1
 
-__all__ = ["TABLES", "BUDGETS", "load_table", "row_options", "reproduce", "evaluate_findings",
+# (table files and findings live in .table_files and .findings; their names stay here)
+__all__ = ["TABLES", "BUDGETS", "KINDS", "RELATIONS", "YES", "NO", "NA", "experiments_dir",
+           "experiments_dirs", "load_table", "row_options", "reproduce", "evaluate_findings",
            "format_report", "main"]
 
-TABLES = ("lifting", "classification", "autoencoder", "pose_estimation")
-BUDGETS = ("smoke", "quick", "full")
-KINDS = ("order", "compare", "drop", "fails", "robuster", "at_least", "beats_initial")
-RELATIONS = (">", ">=", "<", "<=")
-YES, NO, NA = "reproduced", "not reproduced", "n/a"
-
-
-# ---------------------------------------------------------------------- table files
-def experiments_dirs() -> list:
-    """Where table files are looked up, in order: ``$BSP_EXPERIMENTS``, ``./experiments``,
-    the tables installed with the package (``bsp_fast/experiments``), the source tree's
-    ``experiments/``."""
-    from importlib import resources
-
-    dirs = [Path(os.environ["BSP_EXPERIMENTS"])] if os.environ.get("BSP_EXPERIMENTS") else []
-    dirs += [Path.cwd() / "experiments",
-             Path(str(resources.files("bsp_fast").joinpath("experiments"))),
-             Path(__file__).resolve().parents[3] / "experiments"]
-    return dirs
-
-
-def experiments_dir() -> Path:
-    """The first of :func:`experiments_dirs` that exists (else the last)."""
-    dirs = experiments_dirs()
-    return next((d for d in dirs if d.is_dir()), dirs[-1])
-
-
-def load_table(table) -> dict:
-    """A table by name (one of :data:`TABLES`) or a path to its YAML file, checked."""
-    import yaml
-
-    path = Path(table)
-    if path.suffix not in (".yaml", ".yml"):
-        if str(table) not in TABLES:
-            raise ValueError(f"unknown table {table!r}; allowed: {', '.join(TABLES)} "
-                             "(or a path to a table YAML)")
-        dirs = experiments_dirs()
-        path = next((d / f"{table}.yaml" for d in dirs if (d / f"{table}.yaml").is_file()),
-                    None)
-        if path is None:
-            raise ValueError(f"no table file {table}.yaml in " + ", ".join(map(str, dirs))
-                             + " (a broken install? --table FILE.yaml reads your own)")
-    if not path.is_file():
-        raise ValueError(f"{path}: no such table file")
-    doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-    for key in ("table", "task", "metrics", "common", "budgets", "rows", "findings"):
-        if not isinstance(doc, dict) or key not in doc:
-            raise ValueError(f"{path}: missing key {key!r}")
-    try:
-        task = get_task(doc["task"])
-    except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
-    names = [r["name"] for r in doc["rows"]]
-    for r in doc["rows"]:
-        extra = r.get("budgets") or {}
-        if not isinstance(extra, dict) or set(extra) - set(doc["budgets"]):
-            raise ValueError(f"{path}: row {r['name']!r}: budgets must be a mapping with keys "
-                             f"from {list(doc['budgets'])}, got {extra!r}")
-    if len(set(names)) != len(names):
-        raise ValueError(f"{path}: duplicate row names in {names}")
-    for f in doc["findings"]:
-        if f.get("kind") not in KINDS:
-            raise ValueError(f"{path}: finding kind {f.get('kind')!r}; allowed: {', '.join(KINDS)}")
-        if f.get("relation", ">") not in RELATIONS:
-            raise ValueError(f"{path}: relation {f['relation']!r}; allowed: {', '.join(RELATIONS)}")
-        for name in _rows_of(f):
-            if name not in names:
-                raise ValueError(f"{path}: finding {f.get('text')!r} names unknown row {name!r}")
-        if f.get("baseline") is not None and f["baseline"] not in task.finding_baselines:
-            raise ValueError(f"{path}: finding {f.get('text')!r}: baseline {f['baseline']!r}; "
-                             f"allowed for {task.name}: {list(task.finding_baselines)}")
-        if f.get("metric") not in doc["metrics"]:
-            raise ValueError(f"{path}: finding {f.get('text')!r}: metric {f.get('metric')!r} "
-                             f"is not one of {list(doc['metrics'])}")
-    doc["path"] = str(path)
-    return doc
-
-
-def _rows_of(f: dict) -> list:
-    out = []
-    for key in ("rows", "a", "b", "base", "other", "row"):
-        v = f.get(key)
-        out += v if isinstance(v, list) else ([v] if v is not None else [])
-    return out
-
-
-def row_options(table: dict, row: dict, budget: str, data, run_dir, overrides=None) -> dict:
-    """bsp-train options of one row: common < budget < row < the row's own options for this
-    budget (``budgets: {quick: {...}}`` in the row, e.g. fewer epochs for a model that is
-    100x slower than the others) < ``overrides``."""
-    if budget not in table["budgets"]:
-        raise ValueError(f"budget {budget!r} not in {table['path']}; allowed: "
-                         + ", ".join(table["budgets"]))
-    opts = dict(table["common"])
-    opts.update(table["budgets"][budget] or {})
-    opts.update(row.get("options") or {})
-    opts.update((row.get("budgets") or {}).get(budget) or {})
-    opts.update(overrides or {})
-    opts.update(data=str(data), out=str(run_dir))
-    return C.normalise(opts, f"{table['table']} row {row['name']!r}")
 
 
 # ---------------------------------------------------------------------- running
@@ -198,109 +101,6 @@ def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrid
     return {"table": tab["table"], "budget": budget, "dir": str(base), "results": results}
 
 
-# ---------------------------------------------------------------------- findings
-def _better(tab, metric) -> int:
-    """+1 when higher is better, -1 when lower is, 0 when neither."""
-    return {"higher": 1, "lower": -1}.get(tab["metrics"][metric].get("better"), 0)
-
-
-def _fmt(tab, metric, value) -> str:
-    if value is None:
-        return "–"
-    fmt = tab["metrics"][metric].get("format", ".3f")
-    return f"{100 * value:.1f}" if fmt == "pct" else format(value, fmt)
-
-
-def _rel(a, b, relation, margin=0.0) -> bool:
-    d = a - b
-    return {">": d > margin, ">=": d >= -margin, "<": d < -margin, "<=": d <= margin}[relation]
-
-
-def _finding(tab, f, values: dict, initial: dict) -> tuple:
-    """(ours, report, status) of one finding; ``values[source][row]`` is the metric of a row
-    (source ``ours`` or ``report``); ``initial[row]`` the trivial baseline's (ours only)."""
-    metric, sign = f["metric"], _better(tab, f["metric"])
-    fm = lambda v: _fmt(tab, metric, v)  # noqa: E731
-    pp = " p.p." if tab["metrics"][metric].get("format") == "pct" else ""
-    out = {}
-    for src in ("ours", "report"):
-        v = values[src]
-        need = _rows_of(f)
-        if f["kind"] in ("fails", "beats_initial", "at_least"):
-            # a threshold or a trivial baseline is ours to test; the report column says
-            # what the report stated (report_text)
-            if src == "report" or (f["kind"] != "at_least"
-                                   and any(initial.get(r) is None for r in need)):
-                out[src] = ("", None)
-                continue
-        if any(v.get(r) is None for r in need):
-            out[src] = ("", None)
-            continue
-        k = f["kind"]
-        if k == "order":
-            rs = f["rows"]
-            ok = all(sign * (v[a] - v[b]) > 0 for a, b in zip(rs, rs[1:]))
-            text = rs[0] + " " + fm(v[rs[0]])
-            for a, b in zip(rs, rs[1:]):
-                op = "<" if v[a] < v[b] else (">" if v[a] > v[b] else "=")
-                text += f" {op} {b} {fm(v[b])}"
-        elif k == "compare":
-            ok = _rel(v[f["a"]], v[f["b"]], f.get("relation", ">="), f.get("margin", 0.0))
-            text = f"{f['a']} {fm(v[f['a']])} vs {f['b']} {fm(v[f['b']])}"
-        elif k == "drop":
-            drop = sign * (v[f["base"]] - v[f["other"]])
-            ok = drop > 0
-            text = f"{fm(v[f['base']])} -> {fm(v[f['other']])} (loss {fm(drop)}{pp})"
-        elif k == "robuster":
-            la = sign * (v[f["a"][0]] - v[f["a"][1]])
-            lb = sign * (v[f["b"][0]] - v[f["b"][1]])
-            ok = la < lb
-            text = f"loss {fm(la)}{pp} vs {fm(lb)}{pp}"
-        elif k == "at_least":
-            ok = v[f["row"]] >= f["value"]
-            text = f"{f['row']} {fm(v[f['row']])} (threshold {fm(f['value'])})"
-        elif k == "fails":
-            r = f["row"]
-            ok = v[r] <= initial[r] + f.get("margin", 0.0)
-            what = _baseline(tab, f)[0]
-            text = f"{fm(v[r])} vs {what} {fm(initial[r])}"
-        else:  # beats_initial
-            ok = all(sign * (v[r] - initial[r]) > 0 for r in f["rows"])
-            text = "; ".join(f"{r} {fm(v[r])} vs {fm(initial[r])}" for r in f["rows"])
-        out[src] = (text, ok)
-    if f["kind"] == "drop" and f.get("report") is not None and out["report"][1] is None:
-        out["report"] = (f"loss about {fm(f['report'])}{pp}", True)
-    ours, ok = out["ours"]
-    report = out["report"][0] or f.get("report_text", "stated in the report")
-    status = NA if ok is None else (YES if ok else NO)
-    return ours or "rows not run", report, status
-
-
-def _baseline(tab: dict, f: dict) -> tuple:
-    """``(label, f(initial metrics) -> value or None)`` a finding compares with: its
-    ``baseline:`` (one the table's task offers) or the task's trivial baseline."""
-    task = get_task(tab["task"])
-    if f.get("baseline") is not None:
-        return task.finding_baselines[f["baseline"]]
-    return task.baseline, lambda initial: initial.get(f["metric"])
-
-
-def evaluate_findings(tab: dict, results: dict) -> list:
-    """``[{"text", "ours", "report", "status"}]`` for the findings of ``tab`` on the
-    ``results`` of :func:`reproduce`; status ``reproduced``, ``not reproduced`` or ``n/a``
-    (a row it needs was not run). Nothing is hard-coded: the numbers decide."""
-    out = []
-    for f in tab["findings"]:
-        m = f["metric"]
-        values = {"ours": {r: results[r]["metrics"].get(m) for r in results},
-                  "report": {r["name"]: (r.get("report") or {}).get(m) for r in tab["rows"]}}
-        of = _baseline(tab, f)[1]
-        initial = {r: of(results[r]["initial"]) for r in results}
-        ours, report, status = _finding(tab, f, values, initial)
-        out.append({"text": f["text"], "ours": ours, "report": report, "status": status})
-    return out
-
-
 # ---------------------------------------------------------------------- output
 def _md(header, rows) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
@@ -326,9 +126,9 @@ def format_report(tab: dict, res: dict) -> str:
         if settings:
             cells += [f"{r['noise'] or 0:g}", f"{r['mjp'] or 0:g}"
                       if not isinstance(r["mjp"], list) else "per joint"]
-        cells += [_fmt(tab, m, r["metrics"].get(m)) for m in metrics]
-        cells += [_fmt(tab, m, (row.get("report") or {}).get(m)) for m in reported]
-        cells.append(_fmt(tab, metrics[0], r["initial"].get(metrics[0])))
+        cells += [format_value(tab, m, r["metrics"].get(m)) for m in metrics]
+        cells += [format_value(tab, m, (row.get("report") or {}).get(m)) for m in reported]
+        cells.append(format_value(tab, metrics[0], r["initial"].get(metrics[0])))
         cells.append("–" if r["epochs"] is None else f"{r['best_epoch']}/{r['epochs']}")
         rows.append(cells)
     found = evaluate_findings(tab, res["results"])
@@ -371,6 +171,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dry-run", action="store_true",
                    help="write the per-row bsp-train configs and print the commands only")
     p.add_argument("--verbose", action="store_true", help="bsp-train's progress bars and tables")
+    from .seeds import add_options
+
+    add_options(p)  # --seeds, --split-seeds, --jobs
     return p
 
 
@@ -385,6 +188,10 @@ def main(argv=None) -> int:
         tab = load_table(ns.table or ns.table_file)
         overrides = C.parse_hp(ns.set)
         rows = [r.strip() for r in ns.rows.split(",") if r.strip()] if ns.rows else None
+        if ns.seeds != 1 or ns.split_seeds:
+            from .evidence import main_seeds
+
+            return main_seeds(tab, ns, rows, overrides)
         res = reproduce(tab, ns.data, ns.budget, ns.out, rows=rows, overrides=overrides,
                         force=ns.force, quiet=not ns.verbose, dry_run=ns.dry_run)
     except (C.ConfigError, ValueError) as exc:

@@ -4,6 +4,7 @@ A finished run directory holds::
 
     config.yaml              the resolved options (usable as --config)
     metrics.json             test metrics, best-epoch val metrics, initial metrics
+    test_per_recording.json  the sums behind each test metric, per test recording
     curves.png               loss and main metrics per epoch
     checkpoints/best.ckpt    lowest val loss;  checkpoints/last.ckpt  end of the last epoch
     logs/version_N/metrics.csv   CSV logs (one version per start: resumes add one)
@@ -12,7 +13,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
-import os
 import shutil
 from pathlib import Path
 

@@ -15,9 +15,11 @@ from pathlib import Path
 from . import config as C
 from .runs import ENV_TMP, RunDirectory, RunError, default_run_dir, read_run, \
     resolve_checkpoint, write_json
+from .precision import check_precision, native_bf16, resolve_precision
 from .tasks import get_task
 
-__all__ = ["train", "main", "TrainResult"]
+# (resolve_precision, native_bf16 and check_precision live in .precision; importable here too)
+__all__ = ["train", "main", "TrainResult", "resolve_precision", "native_bf16", "check_precision"]
 
 
 @dataclass
@@ -128,44 +130,6 @@ def prepare_data(dm, stages=("fit", "test"), convert: bool = True) -> None:
 
 
 # ---------------------------------------------------------------------- trainer
-def resolve_precision(precision: str, accelerator: str) -> str:
-    """``auto`` -> bf16-mixed on a GPU that supports it, else 32 (CPU: see docs)."""
-    if precision != "auto":
-        return precision
-    import torch
-
-    gpu = accelerator == "gpu" or (accelerator == "auto" and torch.cuda.is_available())
-    if gpu and torch.cuda.is_available() and torch.cuda.is_bf16_supported():
-        return "bf16-mixed"
-    return "32"
-
-
-def native_bf16(accelerator: str) -> bool:
-    """Whether bf16 arithmetic runs natively where ``accelerator`` trains: a CUDA device,
-    or a CPU with AVX512-BF16/AMX."""
-    import torch
-
-    if accelerator != "cpu" and torch.cuda.is_available():
-        return True
-    from ..models.lstm import _cpu_bf16
-
-    return _cpu_bf16()
-
-
-def check_precision(precision: str, accelerator: str) -> None:
-    """bf16 on a CPU without bf16 instructions (AVX512-BF16/AMX): allowed, with a warning.
-    oneDNN then converts to and from bf16 around float32 arithmetic (measured 5-17x
-    slower than 32 on an AVX2 CPU) and has no bf16 LSTM kernel, so the models' LSTM
-    layers run in float32 inside autocast (``models.lstm``)."""
-    import warnings
-
-    if precision.startswith("bf16") and not native_bf16(accelerator):
-        warnings.warn(f"--precision {precision} on a CPU without bf16 instructions "
-                      "(AVX512-BF16/AMX): expect it to be several times slower than "
-                      "--precision 32 (docs/training.md, Precision); LSTM layers run in "
-                      "float32", UserWarning, stacklevel=2)
-
-
 def _extra_logger(kind: str, tmp: Path, name: str):
     import importlib.util
 
@@ -227,7 +191,8 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
                                            patience=cfg["early_stop"]))
         return pl.Trainer(devices=cfg["devices"], strategy=cfg["strategy"],
                           num_nodes=cfg.get("num_nodes") or 1,
-                          max_epochs=cfg["epochs"], logger=loggers, callbacks=callbacks,
+                          max_epochs=cfg["epochs"], max_steps=cfg.get("max_steps") or -1,
+                          logger=loggers, callbacks=callbacks,
                           default_root_dir=str(tmp), log_every_n_steps=50, **common)
     except C.ConfigError:
         raise
@@ -249,7 +214,7 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
     import lightning.pytorch as pl
     import torch
 
-    from .scoring import log_initial
+    from .initial import log_initial
     from .tasks import TASK_MODULES
 
     shared = _shared_tmp(cfg)
@@ -261,7 +226,10 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
     child = bool(os.environ.get(ENV_TMP)) and max(_rank(), started) > 0
     if cfg["threads"]:
         torch.set_num_threads(cfg["threads"])
-    precision = resolve_precision(cfg["precision"], cfg["accelerator"])
+    from ..models import model_class
+
+    precision = resolve_precision(cfg["precision"], cfg["accelerator"],
+                                  model_class(cfg["task"], cfg["model"]))
     dm = make_datamodule(cfg)
     prepare_data(dm, convert=not child)
     pl.seed_everything(cfg["seed"], workers=True, verbose=False)
@@ -318,11 +286,11 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
 
 
 def _initial(cfg: dict, dm, model=None) -> dict:
-    from .scoring import initial_metrics
+    from .initial import initial_metrics
 
     loaders = {"val": dm.val_dataloader(), "test": dm.test_dataloader()}
     return initial_metrics(cfg["task"], dm.train_dataloader(), loaders,
-                           limit=cfg["limit_batches"], model=model)
+                           limit=cfg["limit_batches"], model=model, per_recording=True)
 
 
 def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds):
@@ -330,6 +298,11 @@ def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds):
     from .curves import plot_curves, read_logs
 
     test = dict(trainer.lightning_module.results.get("test", {}))
+    from .breakdown import write_breakdown
+
+    initial = dict(initial)  # the per-recording sums go to their own file, not metrics.json
+    write_breakdown(tmp, cfg["task"], trainer.lightning_module.results.get("test_per_recording"),
+                    initial.pop("test_per_recording", None))
     best_epoch = _best_epoch(trainer)  # 1-based
     logs = read_logs(tmp)  # the best epoch's other val metrics, as logged
     val = {k.split("/", 1)[1]: s[best_epoch - 1] for k, s in logs.items()

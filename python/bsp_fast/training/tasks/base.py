@@ -18,13 +18,13 @@ from dataclasses import dataclass
 __all__ = ["Metric", "Task", "UNIT_SUFFIX"]
 
 #: Table/curve label suffix of a metric's display unit.
-UNIT_SUFFIX = {"mm": " (mm)", "%": " (%)", "": ""}
+UNIT_SUFFIX = {"mm": " (mm)", "mm/frame": " (mm/frame)", "%": " (%)", "": ""}
 
 
 @dataclass(frozen=True)
 class Metric:
-    """One scored value: ``key`` in metrics.json, ``label``, ``unit`` (``mm`` or
-    ``fraction``), ``better`` (``higher``, ``lower`` or ``none``) and ``fmt``, its table
+    """One scored value: ``key`` in metrics.json, ``label``, ``unit`` (``mm``, ``mm per
+    frame`` or ``fraction``), ``better`` (``higher``, ``lower`` or ``none``) and ``fmt``, its table
     format (a format spec, or ``pct``: a fraction shown in %)."""
     key: str
     label: str
@@ -38,8 +38,10 @@ class Metric:
 
     @property
     def display_unit(self) -> str:
-        """``%`` for fractions shown in %, ``mm``, or ``""``."""
-        return "%" if self.percent else ("mm" if self.unit == "mm" else "")
+        """``%`` for fractions shown in %, ``mm``, ``mm/frame``, or ``""``."""
+        if self.percent:
+            return "%"
+        return {"mm": "mm", "mm per frame": "mm/frame"}.get(self.unit, "")
 
     @property
     def header(self) -> str:
@@ -65,6 +67,8 @@ class Task:
     baseline: str = ""
     #: every scored metric, in table order (``loss`` is always scored too)
     metrics: tuple = ()
+    #: scored and saved in metrics.json too, but not columns of the run's table
+    extra_metrics: tuple = ()
     #: keys of the metrics drawn in ``curves.png``
     curves: tuple = ()
     #: inputs can be deformed (``--noise``, ``--mjp``): tables show the setting columns
@@ -82,16 +86,16 @@ class Task:
 
     # ------------------------------------------------------------------ declarations
     def metric(self, key: str) -> Metric:
-        for m in self.metrics:
+        for m in self.metrics + self.extra_metrics:
             if m.key == key:
                 return m
         raise ValueError(f"task {self.name!r} has no metric {key!r}; allowed: "
-                         + ", ".join(m.key for m in self.metrics))
+                         + ", ".join(m.key for m in self.metrics + self.extra_metrics))
 
     @property
     def units(self) -> dict:
         """``{metric key: unit}`` of metrics.json."""
-        return {m.key: m.unit for m in self.metrics}
+        return {m.key: m.unit for m in self.metrics + self.extra_metrics}
 
     def table_columns(self) -> tuple:
         """``(header, where, key, format)``; where ``c``: a config value, ``m``: a metric."""

@@ -59,6 +59,9 @@ class TaskModule(pl.LightningModule):
         self.val_metrics = TaskMetrics(self.task)
         self.test_metrics = TaskMetrics(self.task)
         self.results: dict = {}  # the last computed {"val": {...}, "test": {...}}
+        from ..breakdown import RecordingBreakdown
+
+        self.test_recordings = RecordingBreakdown(self.task)  # -> test_per_recording.json
 
     def forward(self, batch: dict) -> torch.Tensor:
         return self.net.forward_batch(batch)
@@ -78,17 +81,19 @@ class TaskModule(pl.LightningModule):
                  on_epoch=False, batch_size=n)
         return loss
 
-    def _eval_step(self, batch: dict, metrics: TaskMetrics) -> None:
+    def _eval_step(self, batch: dict, metrics: TaskMetrics) -> torch.Tensor:
         self.spec.check_batch(batch)
         output = self.net.forward_batch(batch)
         metrics.update_loss(self.net.loss(output, batch), self.spec.batch_size(batch))
         metrics.update(output, batch, self.net)
+        return output
 
     def validation_step(self, batch: dict, batch_idx: int) -> None:
         self._eval_step(batch, self.val_metrics)
 
     def test_step(self, batch: dict, batch_idx: int) -> None:
-        self._eval_step(batch, self.test_metrics)
+        output = self._eval_step(batch, self.test_metrics)
+        self.test_recordings.update(output.detach().float(), batch, self.net)
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
         """The de-normalised outputs of one batch (tensors; the datasets of
@@ -128,6 +133,8 @@ class TaskModule(pl.LightningModule):
 
     def on_test_epoch_end(self) -> None:
         self._log_metrics("test", self.test_metrics)
+        self.results["test_per_recording"] = self.test_recordings.compute()
+        self.test_recordings.reset()
 
     # ------------------------------------------------------------------ optimiser
     def configure_optimizers(self):

@@ -1,0 +1,158 @@
+"""Intervals over test recordings and the marks of a finding (docs/reproduce.md, "Seeds,
+intervals and marks").
+
+Every metric of the tasks is a ratio of global sums, ``value = sum(num) / sum(den)``
+(errors / joints, correct / joints, 2TP / (2TP + FP + FN) ...). A test split's clips come
+from a few recordings and overlap (sliding windows), so the units that may be resampled
+are the recordings: ``num`` and ``den`` are kept per recording
+(:mod:`bsp_fast.training.breakdown`) and the bootstrap (``scipy.stats.bootstrap``,
+percentile intervals) resamples recordings with all their clips. Two or more rows scored
+on the same recordings are resampled *jointly* (``paired=True``): the interval of a
+difference then reflects only how the rows differ recording by recording.
+
+A finding is **reproduced** when the interval of its statistic lies strictly on the
+report's side of zero, **not reproduced** when it lies strictly on the other side, and
+**inconclusive** otherwise (identical rows give an interval [0, 0]: inconclusive).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..defaults import SEED
+
+__all__ = ["Interval", "CONFIDENCE", "N_RESAMPLES", "YES", "NO", "UNSURE", "pool",
+           "align", "ratio", "ratio_interval", "paired_interval", "mark", "combine_marks"]
+
+CONFIDENCE = 0.95
+N_RESAMPLES = 2000
+YES, NO, UNSURE = "reproduced", "not reproduced", "inconclusive"
+
+
+@dataclass(frozen=True)
+class Interval:
+    """A statistic on the full test set and its bootstrap interval (NaN when it cannot be
+    computed: fewer than two recordings)."""
+    value: float
+    low: float
+    high: float
+    n: int  # recordings resampled
+
+
+def pool(sections, metric: str) -> tuple:
+    """``(recordings, num, den)``: the per-recording sums of ``metric`` added over several
+    runs (seeds) of one row. ``sections``: ``{"recordings": [...], "metrics": {metric:
+    {"num": [...], "den": [...]}}}`` each (a ``test`` or ``initial`` section of
+    ``test_per_recording.json``); a recording tested by several seeds sums their terms."""
+    sums: dict = {}
+    for sec in sections:
+        if metric not in sec["metrics"]:
+            raise ValueError(f"metric {metric!r} not in the per-recording sums; allowed: "
+                             + ", ".join(sorted(sec["metrics"])))
+        m = sec["metrics"][metric]
+        if not (len(m["num"]) == len(m["den"]) == len(sec["recordings"])):
+            raise ValueError(f"metric {metric!r}: num, den and recordings differ in length")
+        for rec, a, b in zip(sec["recordings"], m["num"], m["den"]):
+            a0, b0 = sums.get(rec, (0.0, 0.0))
+            sums[rec] = (a0 + float(a), b0 + float(b))
+    recs = sorted(sums)
+    return recs, np.array([sums[r][0] for r in recs]), np.array([sums[r][1] for r in recs])
+
+
+def align(pooled: list) -> tuple:
+    """The recordings common to every ``(recordings, num, den)`` of ``pooled`` and each
+    one's ``(num, den)`` on them, in one order: ``(recordings, [(num, den), ...])``."""
+    common = sorted(set.intersection(*(set(p[0]) for p in pooled))) if pooled else []
+    out = []
+    for recs, num, den in pooled:
+        pos = {r: i for i, r in enumerate(recs)}
+        idx = np.array([pos[r] for r in common], dtype=np.int64)
+        out.append((num[idx], den[idx]))
+    return common, out
+
+
+def ratio(num, den, axis: int = -1, empty: float = float("nan")):
+    """``sum(num) / sum(den)`` along ``axis``; ``empty`` where the denominator is 0."""
+    n, d = np.sum(num, axis=axis), np.sum(den, axis=axis)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(d > 0, n / np.where(d > 0, d, 1.0), empty)
+
+
+def _bootstrap(arrays: list, statistic, confidence: float, n_resamples: int, seed: int):
+    from scipy.stats import bootstrap
+
+    res = bootstrap(tuple(arrays), statistic, paired=True, vectorized=True, axis=-1,
+                    method="percentile", confidence_level=confidence,
+                    n_resamples=n_resamples, random_state=np.random.default_rng(seed))
+    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def _check(confidence: float, n_resamples: int) -> None:
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
+    if isinstance(n_resamples, bool) or not isinstance(n_resamples, int) or n_resamples < 1:
+        raise ValueError(f"n_resamples must be an integer >= 1, got {n_resamples!r}")
+
+
+def ratio_interval(num, den, *, empty: float = float("nan"), confidence: float = CONFIDENCE,
+                   n_resamples: int = N_RESAMPLES, seed: int = SEED) -> Interval:
+    """``sum(num) / sum(den)`` over the recordings and its bootstrap interval."""
+    return paired_interval([(num, den)], lambda v: v[0], empty=empty, confidence=confidence,
+                           n_resamples=n_resamples, seed=seed)
+
+
+def paired_interval(rows: list, fn, *, empty=float("nan"), confidence: float = CONFIDENCE,
+                    n_resamples: int = N_RESAMPLES, seed: int = SEED) -> Interval:
+    """A statistic of several rows on the same recordings: ``rows`` is a list of
+    ``(num, den)`` arrays aligned on the recordings (:func:`align`); ``fn(values)`` maps
+    the list of row values (arrays over resamples) to the statistic, e.g. ``lambda v: v[0]
+    - v[1]``. The recordings are resampled jointly for all rows. ``empty``: one value, or
+    one per row, for a row whose resampled denominator is 0."""
+    _check(confidence, n_resamples)
+    arrays = [np.asarray(a, dtype=np.float64) for nd in rows for a in nd]
+    n = {a.shape for a in arrays}
+    if len(n) != 1 or len(next(iter(n))) != 1:
+        raise ValueError(f"every num and den must be a 1-d array of the same length (one "
+                         f"entry per recording), got shapes {sorted(n)}")
+    n = next(iter(n))[0]
+    empties = list(empty) if isinstance(empty, (list, tuple)) else [empty] * len(rows)
+
+    def statistic(*arrs, axis=-1):
+        values = [ratio(arrs[2 * i], arrs[2 * i + 1], axis, empties[i])
+                  for i in range(len(rows))]
+        return np.asarray(fn(values), dtype=np.float64)
+
+    value = float(statistic(*arrays))
+    if n < 2 or not np.isfinite(value):
+        return Interval(value, float("nan"), float("nan"), n)
+    low, high = _bootstrap(arrays, statistic, confidence, n_resamples, seed)
+    return Interval(value, low, high, n)
+
+
+def mark(interval: Interval, side: int = 1) -> str:
+    """``reproduced`` when the interval lies strictly on ``side`` (+1: above zero, -1:
+    below) of zero, ``not reproduced`` when strictly on the other side, else
+    ``inconclusive`` (also for an undefined interval)."""
+    if side not in (1, -1):
+        raise ValueError(f"side must be one of [1, -1], got {side!r}")
+    lo, hi = side * interval.low, side * interval.high
+    lo, hi = min(lo, hi), max(lo, hi)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return UNSURE
+    if lo > 0:
+        return YES
+    if hi < 0:
+        return NO
+    return UNSURE
+
+
+def combine_marks(marks: list) -> str:
+    """A finding made of several parts (an ordering of rows: each adjacent pair):
+    reproduced when every part is, not reproduced when any part is not, else
+    inconclusive."""
+    if any(m == NO for m in marks):
+        return NO
+    if marks and all(m == YES for m in marks):
+        return YES
+    return UNSURE

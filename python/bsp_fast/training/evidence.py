@@ -1,0 +1,259 @@
+"""A table trained with several seeds, as evidence: each cell the mean ± std over seeds and
+a 95 % interval from a bootstrap over test recordings (the seeds' per-recording sums
+pooled), each of the report's findings marked by a paired bootstrap over the same
+recordings: reproduced, not reproduced or inconclusive (:mod:`bsp_fast.metrics.uncertainty`),
+with the difference and its interval beside the mark. See docs/reproduce.md.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..metrics import uncertainty as U
+
+__all__ = ["summarise", "evaluate_findings", "format_table", "main_seeds", "DROP_TOLERANCE"]
+
+#: tolerance on an effect size the report gives when its finding states none: half of it
+DROP_TOLERANCE = 0.5
+
+
+def _sign(tab, metric) -> int:
+    return {"higher": 1, "lower": -1}.get(tab["metrics"][metric].get("better"), 0)
+
+
+def _num(tab, metric, v, diff: bool = False) -> str:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "–"
+    fmt = tab["metrics"].get(metric, {}).get("format", ".3f")
+    if fmt == "pct":
+        return f"{100 * v:+.1f}" if diff else f"{100 * v:.1f}"
+    return format(v, ("+" if diff else "") + fmt)
+
+
+class _Sums:
+    """The per-recording sums of a result's rows, loaded once."""
+
+    def __init__(self, res: dict):
+        self.res, self.docs = res, {}
+
+    def _doc(self, path):
+        if path not in self.docs:
+            self.docs[path] = json.loads(Path(path).read_text(encoding="utf-8"))
+        return self.docs[path]
+
+    def pooled(self, row: str, metric: str, initial: bool = False):
+        """``(recordings, num, den, empty)`` of ``row`` over its seeds (``initial``: its
+        trivial baseline's), or None when a run has no per-recording file."""
+        r = self.res["results"][row]
+        section = "initial" if (initial or r.get("source") == "initial") else "test"
+        docs = []
+        for s in r["seeds"].values():
+            if not s.get("per_recording"):
+                return None
+            docs.append(self._doc(s["per_recording"]))
+        parts = [d[section] for d in docs if d.get(section)]
+        if len(parts) != len(docs) or any(metric not in p["metrics"] for p in parts):
+            return None
+        empty = docs[0].get("empty", {}).get(metric)
+        return (*U.pool(parts, metric), float("nan") if empty is None else empty)
+
+
+def _values(r: dict, metric: str) -> list:
+    key = "initial" if r.get("source") == "initial" else "metrics"
+    return [s[key].get(metric) for s in r["seeds"].values() if s[key].get(metric) is not None]
+
+
+def summarise(tab: dict, res: dict) -> dict:
+    """Adds to each row of ``res["results"]`` (from :func:`seeds.reproduce_seeds`):
+    ``metrics`` and ``initial`` (means over seeds), ``std`` (sample std over seeds, None
+    for one seed) and ``interval`` (``[low, high]`` over test recordings, pooled over
+    seeds) per metric of the table. Returns ``res``."""
+    sums = _Sums(res)
+    for name, r in res["results"].items():
+        r["metrics"], r["std"], r["interval"], r["initial"] = {}, {}, {}, {}
+        for m in tab["metrics"]:
+            vals = _values(r, m)
+            r["metrics"][m] = float(np.mean(vals)) if vals else None
+            r["std"][m] = float(np.std(vals, ddof=1)) if len(vals) > 1 else None
+            p = sums.pooled(name, m)
+            if p is not None:
+                iv = U.ratio_interval(p[1], p[2], empty=p[3])
+                r["interval"][m] = [iv.low, iv.high]
+            init = [s["initial"].get(m) for s in r["seeds"].values()
+                    if s["initial"].get(m) is not None]
+            r["initial"][m] = float(np.mean(init)) if init else None
+        r["baseline"] = next(iter(r["seeds"].values())).get("baseline")
+    return res
+
+
+# ---------------------------------------------------------------------- findings
+def _interval(sums: _Sums, parts: list, fn):
+    """``parts``: ``(row, metric, initial)`` each; ``fn(values) -> statistic``."""
+    pooled = [sums.pooled(row, metric, initial) for row, metric, initial in parts]
+    if any(p is None for p in pooled):
+        return None
+    _, aligned = U.align([p[:3] for p in pooled])
+    return U.paired_interval(aligned, fn, empty=[p[3] for p in pooled])
+
+
+def _text(tab, metric, label: str, iv) -> str:
+    pp = " p.p." if tab["metrics"][metric].get("format") == "pct" else ""
+    return (f"{label} {_num(tab, metric, iv.value, True)}{pp} "
+            f"[{_num(tab, metric, iv.low, True)}, {_num(tab, metric, iv.high, True)}]")
+
+
+def _relation(rel: str, margin: float):
+    """(offset, side) of ``a - b`` for a ``compare`` relation: the statistic is
+    ``a - b + offset`` and it must lie on ``side`` of zero."""
+    return {">": (-margin, 1), ">=": (margin, 1), "<": (margin, -1), "<=": (-margin, -1)}[rel]
+
+
+def _finding(tab, f, sums: _Sums, have) -> tuple:
+    """(ours text, status) of one finding."""
+    m, sign, k = f["metric"], _sign(tab, f["metric"]), f["kind"]
+    pieces = []  # (label, parts, fn, side)
+    if k == "order":
+        for a, b in zip(f["rows"], f["rows"][1:]):
+            pieces.append((f"{a} − {b}", [(a, m, False), (b, m, False)],
+                           lambda v: v[0] - v[1], sign))
+    elif k == "compare":
+        off, side = _relation(f.get("relation", ">="), f.get("margin", 0.0))
+        pieces.append((f"{f['a']} − {f['b']}" + (f" {off:+g}" if off else ""),
+                       [(f["a"], m, False), (f["b"], m, False)],
+                       lambda v: v[0] - v[1] + off, side))
+    elif k == "drop":
+        pieces.append(("loss", [(f["base"], m, False), (f["other"], m, False)],
+                       lambda v: sign * (v[0] - v[1]), 1))
+    elif k == "robuster":
+        (a0, a1), (b0, b1) = f["a"], f["b"]
+        pieces.append(("extra loss of b", [(a0, m, False), (a1, m, False), (b0, m, False),
+                                           (b1, m, False)],
+                       lambda v: sign * (v[2] - v[3]) - sign * (v[0] - v[1]), 1))
+    elif k == "at_least":
+        pieces.append((f"{f['row']} − {_num(tab, m, f['value'])}", [(f["row"], m, False)],
+                       lambda v: v[0] - f["value"], 1))
+    elif k == "fails":
+        base = "f1_constant" if f.get("baseline") == "constant" else m
+        margin = f.get("margin", 0.0)
+        pieces.append((f"{f['row']} − (trivial {margin:+g})",
+                       [(f["row"], m, False), (f["row"], base, True)],
+                       lambda v: sign * (v[0] - v[1]) - margin, -1))
+    else:  # beats_initial
+        for r in f["rows"]:
+            pieces.append((f"{r} − trivial", [(r, m, False), (r, m, True)],
+                           lambda v: v[0] - v[1], sign))
+    if any(row not in have for _, parts, _, _ in pieces for row, _, _ in parts):
+        return "rows not run", "n/a", None
+    texts, marks, first = [], [], None
+    for label, parts, fn, side in pieces:
+        iv = _interval(sums, parts, fn)
+        if iv is None:
+            return "no per-recording sums", "n/a", None
+        first = first or iv
+        marks.append(U.mark(iv, side))
+        texts.append(_text(tab, m, label, iv) + f" ({marks[-1]})" * (len(pieces) > 1))
+    ours = "; ".join(texts)
+    if k == "drop" and f.get("report") is not None:
+        tol = f.get("tolerance", DROP_TOLERANCE * abs(f["report"]))
+        lo, hi = f["report"] - tol, f["report"] + tol
+        agrees = first.high >= lo and first.low <= hi
+        ours += (f"; size {'agrees with' if agrees else 'differs from'} the report's "
+                 f"{_num(tab, m, f['report'])} ± {_num(tab, m, tol)}")
+    return ours, U.combine_marks(marks), first
+
+
+def evaluate_findings(tab: dict, res: dict) -> list:
+    """``[{"text", "ours", "report", "status", "difference", "interval"}]``: each finding
+    marked by the bootstrap over test recordings (``res`` from :func:`summarise`). The
+    report column is :func:`findings.evaluate_findings`'s, on the report's numbers."""
+    from .findings import evaluate_findings as point_findings
+
+    point = point_findings(tab, {n: {"metrics": r["metrics"], "initial": r["initial"]}
+                                 for n, r in res["results"].items()})
+    sums, out = _Sums(res), []
+    for f, p in zip(tab["findings"], point):
+        ours, status, iv = _finding(tab, f, sums, set(res["results"]))
+        out.append({"text": f["text"], "ours": ours, "report": p["report"], "status": status,
+                    "difference": None if iv is None else iv.value,
+                    "interval": None if iv is None else [iv.low, iv.high],
+                    "recordings": None if iv is None else iv.n})
+    return out
+
+
+# ---------------------------------------------------------------------- output
+def _cell(tab, m, r) -> str:
+    mean, std, iv = r["metrics"].get(m), r["std"].get(m), r["interval"].get(m)
+    text = _num(tab, m, mean)
+    if std is not None:
+        text += f" ± {_num(tab, m, std)}"
+    if iv and not any(math.isnan(x) for x in iv):
+        text += f" [{_num(tab, m, iv[0])}, {_num(tab, m, iv[1])}]"
+    return text
+
+
+def _md(header, rows) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join(lines + ["| " + " | ".join(str(c) for c in r) + " |" for r in rows])
+
+
+def format_table(tab: dict, res: dict, findings: list) -> str:
+    """Markdown: cells ``mean ± std [95 % interval]``, the report's values, the trivial
+    baseline, epochs per seed; then the findings with their difference, interval, mark."""
+    metrics = list(tab["metrics"])
+    reported = [m for m in metrics if any(m in (r.get("report") or {}) for r in tab["rows"])]
+    settings = tab["task"] in ("classification", "autoencoder")
+    header = ["row", "model"] + (["σ (px)", "MJP"] if settings else [])
+    header += [tab["metrics"][m]["label"] for m in metrics]
+    header += [f"report {tab['metrics'][m]['label']}" for m in reported]
+    header += [f"trivial {tab['metrics'][metrics[0]]['label']}", "epochs (best/run) per seed"]
+    rows = []
+    for row in tab["rows"]:
+        r = res["results"].get(row["name"])
+        if r is None:
+            continue
+        cells = [row["name"], row.get("label", row["name"])]
+        if settings:
+            cells += [f"{r.get('noise') or 0:g}", "per joint" if isinstance(r.get("mjp"), list)
+                      else f"{r.get('mjp') or 0:g}"]
+        cells += [_cell(tab, m, r) for m in metrics]
+        cells += [_num(tab, m, (row.get("report") or {}).get(m)) for m in reported]
+        cells.append(_num(tab, metrics[0], r["initial"].get(metrics[0])))
+        cells.append("–" if r.get("source") == "initial" else ", ".join(
+            f"{s['best_epoch']}/{s['epochs']}" for s in r["seeds"].values()))
+        rows.append(cells)
+    n = len(res.get("seeds") or [])
+    split = "seed varied with the seed" if res.get("split_seeds") else "fixed"
+    text = [f"### {tab['title']} — budget {res['budget']}, {n} seeds (split {split})", "",
+            f"Cells: mean ± std over seeds [95 % interval, bootstrap over test recordings]. "
+            f"Rule: {tab.get('budget_rule', '').strip()}", "", _md(header, rows), "",
+            _md(["finding (report)", "ours: difference [95 % interval]", "report", "status"],
+                [[f["text"], f["ours"], f["report"], f["status"]] for f in findings])]
+    return "\n".join(text) + "\n"
+
+
+def main_seeds(tab: dict, ns, rows, overrides) -> int:
+    """``bsp-reproduce ... --seeds N``: trains, prints the table, writes ``results.md``,
+    ``results.json`` (per-seed values, intervals, marks) and ``curves.png``."""
+    from ..atomic import write_text
+    from .seeds import learning_curves, reproduce_seeds
+
+    res = reproduce_seeds(tab, ns.data, ns.budget, ns.out, seeds=ns.seeds,
+                          split_seeds=ns.split_seeds, jobs=ns.jobs, rows=rows,
+                          overrides=overrides, force=ns.force, quiet=not ns.verbose,
+                          dry_run=ns.dry_run)
+    if ns.dry_run:
+        return 0
+    summarise(tab, res)
+    found = evaluate_findings(tab, res)
+    text = format_table(tab, res, found)
+    print(text)
+    base = Path(res["dir"])
+    curves = learning_curves(tab, res)
+    write_text(base / "results.md", text)
+    write_text(base / "results.json", json.dumps({**res, "findings": found}, indent=1,
+                                                 default=str))
+    print(f"wrote {base / 'results.md'}" + (f" and {curves}" if curves else ""))
+    return 0

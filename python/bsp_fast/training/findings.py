@@ -1,0 +1,113 @@
+"""The report's findings, marked from one run per row: orderings, effect directions and
+sizes, "fails", "beats the trivial baseline" (``bsp-reproduce`` without ``--seeds``; with
+it, :mod:`.evidence` marks them from intervals). See docs/reproduce.md."""
+from __future__ import annotations
+
+from .tasks import get_task
+from .table_files import rows_of
+
+__all__ = ["evaluate_findings", "format_value", "YES", "NO", "NA"]
+
+YES, NO, NA = "reproduced", "not reproduced", "n/a"
+
+
+def _better(tab, metric) -> int:
+    """+1 when higher is better, -1 when lower is, 0 when neither."""
+    return {"higher": 1, "lower": -1}.get(tab["metrics"][metric].get("better"), 0)
+
+
+def format_value(tab, metric, value) -> str:
+    if value is None:
+        return "–"
+    fmt = tab["metrics"][metric].get("format", ".3f")
+    return f"{100 * value:.1f}" if fmt == "pct" else format(value, fmt)
+
+
+def _rel(a, b, relation, margin=0.0) -> bool:
+    d = a - b
+    return {">": d > margin, ">=": d >= -margin, "<": d < -margin, "<=": d <= margin}[relation]
+
+
+def _finding(tab, f, values: dict, initial: dict) -> tuple:
+    """(ours, report, status) of one finding; ``values[source][row]`` is the metric of a row
+    (source ``ours`` or ``report``); ``initial[row]`` the trivial baseline's (ours only)."""
+    metric, sign = f["metric"], _better(tab, f["metric"])
+    fm = lambda v: format_value(tab, metric, v)  # noqa: E731
+    pp = " p.p." if tab["metrics"][metric].get("format") == "pct" else ""
+    out = {}
+    for src in ("ours", "report"):
+        v = values[src]
+        need = rows_of(f)
+        if f["kind"] in ("fails", "beats_initial", "at_least"):
+            # a threshold or a trivial baseline is ours to test; the report column says
+            # what the report stated (report_text)
+            if src == "report" or (f["kind"] != "at_least"
+                                   and any(initial.get(r) is None for r in need)):
+                out[src] = ("", None)
+                continue
+        if any(v.get(r) is None for r in need):
+            out[src] = ("", None)
+            continue
+        k = f["kind"]
+        if k == "order":
+            rs = f["rows"]
+            ok = all(sign * (v[a] - v[b]) > 0 for a, b in zip(rs, rs[1:]))
+            text = rs[0] + " " + fm(v[rs[0]])
+            for a, b in zip(rs, rs[1:]):
+                op = "<" if v[a] < v[b] else (">" if v[a] > v[b] else "=")
+                text += f" {op} {b} {fm(v[b])}"
+        elif k == "compare":
+            ok = _rel(v[f["a"]], v[f["b"]], f.get("relation", ">="), f.get("margin", 0.0))
+            text = f"{f['a']} {fm(v[f['a']])} vs {f['b']} {fm(v[f['b']])}"
+        elif k == "drop":
+            drop = sign * (v[f["base"]] - v[f["other"]])
+            ok = drop > 0
+            text = f"{fm(v[f['base']])} -> {fm(v[f['other']])} (loss {fm(drop)}{pp})"
+        elif k == "robuster":
+            la = sign * (v[f["a"][0]] - v[f["a"][1]])
+            lb = sign * (v[f["b"][0]] - v[f["b"][1]])
+            ok = la < lb
+            text = f"loss {fm(la)}{pp} vs {fm(lb)}{pp}"
+        elif k == "at_least":
+            ok = v[f["row"]] >= f["value"]
+            text = f"{f['row']} {fm(v[f['row']])} (threshold {fm(f['value'])})"
+        elif k == "fails":
+            r = f["row"]
+            ok = v[r] <= initial[r] + f.get("margin", 0.0)
+            what = _baseline(tab, f)[0]
+            text = f"{fm(v[r])} vs {what} {fm(initial[r])}"
+        else:  # beats_initial
+            ok = all(sign * (v[r] - initial[r]) > 0 for r in f["rows"])
+            text = "; ".join(f"{r} {fm(v[r])} vs {fm(initial[r])}" for r in f["rows"])
+        out[src] = (text, ok)
+    if f["kind"] == "drop" and f.get("report") is not None and out["report"][1] is None:
+        out["report"] = (f"loss about {fm(f['report'])}{pp}", True)
+    ours, ok = out["ours"]
+    report = out["report"][0] or f.get("report_text", "stated in the report")
+    status = NA if ok is None else (YES if ok else NO)
+    return ours or "rows not run", report, status
+
+
+def _baseline(tab: dict, f: dict) -> tuple:
+    """``(label, f(initial metrics) -> value or None)`` a finding compares with: its
+    ``baseline:`` (one the table's task offers) or the task's trivial baseline."""
+    task = get_task(tab["task"])
+    if f.get("baseline") is not None:
+        return task.finding_baselines[f["baseline"]]
+    return task.baseline, lambda initial: initial.get(f["metric"])
+
+
+def evaluate_findings(tab: dict, results: dict) -> list:
+    """``[{"text", "ours", "report", "status"}]`` for the findings of ``tab`` on the
+    ``results`` of :func:`reproduce`; status ``reproduced``, ``not reproduced`` or ``n/a``
+    (a row it needs was not run). Nothing is hard-coded: the numbers decide."""
+    out = []
+    for f in tab["findings"]:
+        m = f["metric"]
+        values = {"ours": {r: results[r]["metrics"].get(m) for r in results},
+                  "report": {r["name"]: (r.get("report") or {}).get(m) for r in tab["rows"]}}
+        of = _baseline(tab, f)[1]
+        initial = {r: of(results[r]["initial"]) for r in results}
+        ours, report, status = _finding(tab, f, values, initial)
+        out.append({"text": f["text"], "ours": ours, "report": report, "status": status})
+    return out

@@ -1,0 +1,141 @@
+"""The table files of ``bsp-reproduce`` (``experiments/TABLE.yaml``): where they are found,
+how they are read and checked (rows, findings, the one budget rule per table), and a row's
+resolved ``bsp-train`` options. See docs/reproduce.md.
+
+A table file holds ``common`` options, ``budgets`` (smoke / quick / full option sets),
+``rows`` (a name, a label, the row's own options, optionally the report's values),
+``findings`` and ``budget_rule`` (the training rule every row follows, in words).
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from . import config as C
+from .tasks import get_task
+
+__all__ = ["TABLES", "BUDGETS", "KINDS", "RELATIONS", "RULE_KEYS", "experiments_dirs",
+           "experiments_dir", "load_table", "row_options", "check_budget_rule", "rows_of"]
+
+TABLES = ("lifting", "classification", "autoencoder", "pose_estimation")
+BUDGETS = ("smoke", "quick", "full")
+KINDS = ("order", "compare", "drop", "fails", "robuster", "at_least", "beats_initial")
+RELATIONS = (">", ">=", "<", "<=")
+RULE_KEYS = ("epochs", "max_steps", "early_stop", "limit_batches", "batch_size")
+
+
+def check_budget_rule(tab: dict) -> None:
+    """One budget rule per table: the table states it (``budget_rule``), and no row changes
+    the epochs, update cap, patience or batch limit of a budget; a row may use its own
+    batch size only with an ``own_batch_size`` reason (the same update cap then applies)."""
+    where = tab.get("path", tab.get("table"))
+    if not isinstance(tab.get("budget_rule"), str) or not tab["budget_rule"].strip():
+        raise ValueError(f"{where}: missing key 'budget_rule' (the table's training rule, "
+                         "in words)")
+    for row in tab["rows"]:
+        for budget, opts in (row.get("budgets") or {}).items():
+            for key in set(opts or {}) & set(RULE_KEYS):
+                if key == "batch_size" and row.get("own_batch_size"):
+                    continue
+                raise ValueError(
+                    f"{where}: row {row['name']!r} sets {key!r} for budget {budget!r}: every "
+                    f"row of a table follows its budget rule ({', '.join(RULE_KEYS)} are the "
+                    "budget's; a row's own batch_size needs an own_batch_size reason)")
+        if set(RULE_KEYS) & set(row.get("options") or {}):
+            raise ValueError(f"{where}: row {row['name']!r} sets budget options "
+                             f"{sorted(set(RULE_KEYS) & set(row['options']))} in 'options'")
+
+
+def experiments_dirs() -> list:
+    """Where table files are looked up, in order: ``$BSP_EXPERIMENTS``, ``./experiments``,
+    the tables installed with the package (``bsp_fast/experiments``), the source tree's
+    ``experiments/``."""
+    from importlib import resources
+
+    dirs = [Path(os.environ["BSP_EXPERIMENTS"])] if os.environ.get("BSP_EXPERIMENTS") else []
+    dirs += [Path.cwd() / "experiments",
+             Path(str(resources.files("bsp_fast").joinpath("experiments"))),
+             Path(__file__).resolve().parents[3] / "experiments"]
+    return dirs
+
+
+def experiments_dir() -> Path:
+    """The first of :func:`experiments_dirs` that exists (else the last)."""
+    dirs = experiments_dirs()
+    return next((d for d in dirs if d.is_dir()), dirs[-1])
+
+
+def load_table(table) -> dict:
+    """A table by name (one of :data:`TABLES`) or a path to its YAML file, checked."""
+    import yaml
+
+    path = Path(table)
+    if path.suffix not in (".yaml", ".yml"):
+        if str(table) not in TABLES:
+            raise ValueError(f"unknown table {table!r}; allowed: {', '.join(TABLES)} "
+                             "(or a path to a table YAML)")
+        dirs = experiments_dirs()
+        path = next((d / f"{table}.yaml" for d in dirs if (d / f"{table}.yaml").is_file()),
+                    None)
+        if path is None:
+            raise ValueError(f"no table file {table}.yaml in " + ", ".join(map(str, dirs))
+                             + " (a broken install? --table FILE.yaml reads your own)")
+    if not path.is_file():
+        raise ValueError(f"{path}: no such table file")
+    doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    for key in ("table", "task", "metrics", "common", "budgets", "rows", "findings"):
+        if not isinstance(doc, dict) or key not in doc:
+            raise ValueError(f"{path}: missing key {key!r}")
+    try:
+        task = get_task(doc["task"])
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    names = [r["name"] for r in doc["rows"]]
+    for r in doc["rows"]:
+        extra = r.get("budgets") or {}
+        if not isinstance(extra, dict) or set(extra) - set(doc["budgets"]):
+            raise ValueError(f"{path}: row {r['name']!r}: budgets must be a mapping with keys "
+                             f"from {list(doc['budgets'])}, got {extra!r}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"{path}: duplicate row names in {names}")
+    for f in doc["findings"]:
+        if f.get("kind") not in KINDS:
+            raise ValueError(f"{path}: finding kind {f.get('kind')!r}; allowed: {', '.join(KINDS)}")
+        if f.get("relation", ">") not in RELATIONS:
+            raise ValueError(f"{path}: relation {f['relation']!r}; allowed: {', '.join(RELATIONS)}")
+        for name in rows_of(f):
+            if name not in names:
+                raise ValueError(f"{path}: finding {f.get('text')!r} names unknown row {name!r}")
+        if f.get("baseline") is not None and f["baseline"] not in task.finding_baselines:
+            raise ValueError(f"{path}: finding {f.get('text')!r}: baseline {f['baseline']!r}; "
+                             f"allowed for {task.name}: {list(task.finding_baselines)}")
+        if f.get("metric") not in doc["metrics"]:
+            raise ValueError(f"{path}: finding {f.get('text')!r}: metric {f.get('metric')!r} "
+                             f"is not one of {list(doc['metrics'])}")
+    doc["path"] = str(path)
+    check_budget_rule(doc)
+    return doc
+
+
+def rows_of(f: dict) -> list:
+    out = []
+    for key in ("rows", "a", "b", "base", "other", "row"):
+        v = f.get(key)
+        out += v if isinstance(v, list) else ([v] if v is not None else [])
+    return out
+
+
+def row_options(table: dict, row: dict, budget: str, data, run_dir, overrides=None) -> dict:
+    """bsp-train options of one row: common < budget < row < the row's own options for this
+    budget (``budgets: {quick: {...}}`` in the row, e.g. fewer epochs for a model that is
+    100x slower than the others) < ``overrides``."""
+    if budget not in table["budgets"]:
+        raise ValueError(f"budget {budget!r} not in {table['path']}; allowed: "
+                         + ", ".join(table["budgets"]))
+    opts = dict(table["common"])
+    opts.update(table["budgets"][budget] or {})
+    opts.update(row.get("options") or {})
+    opts.update((row.get("budgets") or {}).get(budget) or {})
+    opts.update(overrides or {})
+    opts.update(data=str(data), out=str(run_dir))
+    return C.normalise(opts, f"{table['table']} row {row['name']!r}")

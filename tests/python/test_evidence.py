@@ -1,0 +1,342 @@
+"""Evidence, not anecdotes: the bootstrap over test recordings and the paired marks on
+cases with known answers, root-relative N-MPJPE in every lifting target space, PoseFormer
+scored on every frame, bf16 against fp32, --seeds smoke runs, and every table's `full`
+rows run for two batches on the CPU (so a GPU user's first run does not fail on a config
+error)."""
+from __future__ import annotations
+
+import json
+import re
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+from bsp_fast import metrics as M
+from bsp_fast import models
+from bsp_fast.data import ClipDataset
+from bsp_fast.data.testing import write_clip_file
+from bsp_fast.metrics import uncertainty as U
+from bsp_fast.skeleton import HIPS
+from bsp_fast.training import evidence as E
+from bsp_fast.training import reproduce as R
+from bsp_fast.training import seeds as S
+from bsp_fast.training.scoring import TaskMetrics
+from bsp_fast.training.train import resolve_precision
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp("evidence")
+    files = {"lifting": root / "l16.h5", "classification": root / "bench.h5",
+             "autoencoder": root / "l30.h5", "pose_estimation": root / "media.h5"}
+    write_clip_file(files["lifting"], clips=(24, 12, 12), clip_length=16, seed=1)
+    write_clip_file(files["autoencoder"], clips=(24, 12, 12), clip_length=30, seed=2)
+    write_clip_file(files["pose_estimation"], clips=(16, 8, 8), clip_length=4, seed=4,
+                    media=True)
+    write_clip_file(files["classification"], clips=(24, 12, 12), clip_length=16, seed=3)
+    with h5py.File(files["classification"], "a") as f:
+        f.attrs["benchmark"] = 1
+    return files
+
+
+# ---------------------------------------------------------------------- statistics
+def _recordings(n=30, seed=0):
+    rng = np.random.default_rng(seed)
+    den = rng.integers(10, 60, n).astype(float)  # joints per recording
+    return rng.uniform(40, 160, n) * den, den   # error sums: 40-160 mm per joint
+
+
+def test_identical_runs_are_inconclusive():
+    a = _recordings()
+    iv = U.paired_interval([a, a], lambda v: v[0] - v[1])
+    assert (iv.value, iv.low, iv.high, iv.n) == (0.0, 0.0, 0.0, 30)
+    assert U.mark(iv, 1) == U.mark(iv, -1) == "inconclusive"
+
+
+def test_a_constant_shift_is_reproduced_and_the_opposite_claim_is_not():
+    num, den = _recordings()
+    worse = (num + 5.0 * den, den)  # 5 mm more on every joint of every recording
+    iv = U.paired_interval([worse, (num, den)], lambda v: v[0] - v[1])
+    assert iv.value == pytest.approx(5.0) and iv.low == pytest.approx(5.0)
+    assert iv.high == pytest.approx(5.0)
+    assert U.mark(iv, 1) == "reproduced" and U.mark(iv, -1) == "not reproduced"
+    # unpaired, the recordings' own spread (40-160 mm) would swamp the 5 mm
+    a, b = U.ratio_interval(*worse), U.ratio_interval(num, den)
+    assert a.low < b.high
+
+
+def test_ratio_interval_matches_the_normal_approximation():
+    # 400 recordings of one joint each, errors N(3, 2): 95 % interval about 3 +- 1.96 * 2 / 20
+    x = np.random.default_rng(1).normal(3.0, 2.0, 400)
+    iv = U.ratio_interval(x, np.ones(400))
+    assert iv.value == pytest.approx(x.mean())
+    assert (iv.high - iv.low) / 2 == pytest.approx(1.96 * x.std() / 20, rel=0.15)
+    assert iv.low < iv.value < iv.high
+
+
+def test_pool_sums_the_seeds_of_a_recording_and_align_keeps_common_recordings():
+    s1 = {"recordings": ["a", "b"], "metrics": {"m": {"num": [1.0, 2.0], "den": [1, 1]}}}
+    s2 = {"recordings": ["b", "c"], "metrics": {"m": {"num": [4.0, 8.0], "den": [2, 2]}}}
+    recs, num, den = U.pool([s1, s2], "m")
+    assert recs == ["a", "b", "c"] and num.tolist() == [1, 6, 8] and den.tolist() == [1, 3, 2]
+    common, rows = U.align([(recs, num, den), (["c", "b"], np.array([1.0, 2]), np.ones(2))])
+    assert common == ["b", "c"] and rows[1][0].tolist() == [2, 1] and rows[0][0].tolist() == [6, 8]
+    with pytest.raises(ValueError, match="allowed: m"):
+        U.pool([s1], "f1")
+
+
+def test_bad_arguments_and_degenerate_cases():
+    one = U.ratio_interval([3.0], [1.0])  # one recording: nothing to resample
+    assert one.value == 3.0 and np.isnan(one.low) and U.mark(one) == "inconclusive"
+    assert U.ratio([0.0, 0.0], [0.0, 0.0], empty=0.0) == 0.0
+    with pytest.raises(ValueError, match=r"side must be one of \[1, -1\]"):
+        U.mark(one, 0)
+    with pytest.raises(ValueError, match="confidence must lie in"):
+        U.ratio_interval([1.0, 2.0], [1.0, 1.0], confidence=95)
+    with pytest.raises(ValueError, match="same length"):
+        U.paired_interval([([1.0, 2.0], [1.0])], lambda v: v[0])
+    assert U.combine_marks(["reproduced", "inconclusive"]) == "inconclusive"
+    assert U.combine_marks(["reproduced", "not reproduced"]) == "not reproduced"
+    assert U.combine_marks(["reproduced"] * 3) == "reproduced"
+
+
+def _fake_results(tmp_path, table: dict, per_row: dict) -> dict:
+    """Results of two seeds per row whose per-recording error sums are ``per_row[row]``
+    (the same for both seeds) with 40 recordings."""
+    rng = np.random.default_rng(5)
+    den = rng.integers(10, 60, 40).astype(float)
+    recs = [f"rec{i}/0_0" for i in range(40)]
+    out = {"table": table["table"], "budget": "smoke", "seeds": [1, 2], "results": {}}
+    for row, per_joint in per_row.items():
+        seeds = {}
+        for seed in ("1", "2"):
+            path = tmp_path / f"{row}-{seed}.json"
+            sec = {"recordings": recs, "metrics": {m: {"num": (per_joint * den).tolist(),
+                                                       "den": den.tolist()}
+                                                   for m in table["metrics"]}}
+            path.write_text(json.dumps({"test": sec, "initial": sec, "empty": {}}))
+            value = float((per_joint * den).sum() / den.sum())
+            seeds[seed] = {"metrics": {m: value for m in table["metrics"]},
+                           "initial": {m: value for m in table["metrics"]},
+                           "per_recording": str(path), "epochs": 1, "best_epoch": 1}
+        out["results"][row] = {"seeds": seeds, "source": "test"}
+    return E.summarise(table, out)
+
+
+def test_findings_marks_on_known_cases(tmp_path):
+    tab = R.load_table("lifting")
+    base = np.random.default_rng(2).uniform(40, 160, 40)
+    rows = ["poseformer", "lstm", "baseline_3d", "lstm_relative_rot"]
+    ordered = {r: base + 10.0 * i for i, r in enumerate(rows)}  # each 10 mm worse
+    found = E.evaluate_findings(tab, _fake_results(tmp_path, tab, ordered))
+    assert [f["status"] for f in found[:2]] == ["reproduced", "reproduced"]
+    assert found[0]["difference"] == pytest.approx(-10.0)  # first pair, lower is better
+    assert "poseformer − lstm -10.00 [-10.00, -10.00]" in found[0]["ours"]
+    same = E.evaluate_findings(tab, _fake_results(tmp_path, tab, {r: base for r in rows}))
+    assert [f["status"] for f in same] == ["inconclusive"] * 3
+    swapped = dict(ordered, poseformer=base + 15.0)  # PoseFormer now worse than the LSTM
+    assert E.evaluate_findings(tab, _fake_results(tmp_path, tab, swapped))[0]["status"] == \
+        "not reproduced"
+    # a drop with the report's size: compared with its tolerance
+    ae = R.load_table("autoencoder")
+    clean = np.random.default_rng(3).uniform(0.8, 1.0, 40)
+    res = _fake_results(tmp_path, ae, {"clean": clean, "noisy": clean - 0.1})
+    drop = E.evaluate_findings(ae, res)[1]
+    assert drop["status"] == "reproduced" and "size agrees with the report's 10.0" in drop["ours"]
+    res = _fake_results(tmp_path, ae, {"clean": clean, "noisy": clean - 0.3})
+    assert "size differs from the report's 10.0 ± 5.0" in E.evaluate_findings(ae, res)[1]["ours"]
+    table = E.format_table(ae, res, E.evaluate_findings(ae, res))
+    assert re.search(r"\| clean \| .* \| \d+\.\d ± 0\.0 \[\d+\.\d, \d+\.\d\] \|", table)
+
+
+def test_budget_rule_is_checked():
+    tab = R.load_table("lifting")
+    S.check_budget_rule(tab)
+    bad = dict(tab, rows=[dict(tab["rows"][1], budgets={"quick": {"epochs": 3}})])
+    with pytest.raises(ValueError, match="row 'lstm' sets 'epochs' for budget 'quick'"):
+        S.check_budget_rule(bad)
+    bad = dict(tab, rows=[dict(tab["rows"][1], budgets={"quick": {"batch_size": 8}})])
+    with pytest.raises(ValueError, match="own_batch_size"):
+        S.check_budget_rule(bad)
+    with pytest.raises(ValueError, match="missing key 'budget_rule'"):
+        S.check_budget_rule({k: v for k, v in tab.items() if k != "budget_rule"})
+    for name in R.TABLES:  # every table: one rule, with a patience and a cap of updates
+        t = R.load_table(name)
+        for budget in ("quick", "full"):
+            assert t["budgets"][budget]["early_stop"] > 0 and t["budgets"][budget]["max_steps"] > 0
+
+
+# ---------------------------------------------------------------------- metrics
+@pytest.mark.parametrize("space", ["absolute", "world", "camera"])
+def test_scaled_about_the_hips_has_zero_n_mpjpe_in_every_lifting_target_space(data, space):
+    ds = ClipDataset(data["lifting"], "test", "lifting", lifting_target=space)
+    b = ds[:6]
+    gt = b["targets_m"].double() * 1000
+    hips = gt[..., HIPS:HIPS + 1, :]
+    pred = hips + 1.1 * (gt - hips)
+    assert float(M.n_mpjpe(pred, gt)) == pytest.approx(0.0, abs=1e-9)
+    assert float(M.mpjpe(pred, gt)) > 1.0
+    # the scoring path: any multiple of the normalised target is a pose scaled about the
+    # hips once de-normalised, so N-MPJPE is 0 and never above MPJPE
+    tm = TaskMetrics("lifting")
+    tm.update(1.1 * b["targets"], b, models.create("lifting", "lstm"))
+    out = tm.compute()
+    assert out["n_mpjpe_mm"] == pytest.approx(0.0, abs=1e-3)
+    assert out["n_mpjpe_mm_centre"] == pytest.approx(0.0, abs=1e-3)
+    assert out["mpjpe_mm"] > 1.0
+    if space == "world":  # scaled about the origin instead, the world offset shows
+        p, g = pred.numpy(), gt.numpy()
+        s = (p * g).sum((-1, -2)) / (p * p).sum((-1, -2))
+        assert np.linalg.norm(s[..., None, None] * p - g, axis=-1).mean() > 1.0
+
+
+def test_poseformer_is_scored_on_every_frame_like_the_other_models(data):
+    b = ClipDataset(data["lifting"], "test", "lifting")[:4]
+    counts = {}
+    for name, hp in (("poseformer", dict(embed_dim_ratio=8, depth=1)), ("lstm", {})):
+        torch.manual_seed(0)
+        m = models.create("lifting", name, **hp).eval()
+        with torch.no_grad():
+            out = m.forward_batch(b)
+        assert out.shape == (4, 16, 26, 3)
+        tm = TaskMetrics("lifting")
+        tm.update(out, b, m)
+        counts[name] = (int(tm.scores["mpjpe_mm"].count),
+                        int(tm.scores["mpjpe_mm_centre"].count))
+    assert counts["poseformer"] == counts["lstm"] == (4 * 16 * 26, 4 * 8 * 26)
+    pf = models.create("lifting", "poseformer", embed_dim_ratio=8, depth=1)
+    assert pf.centre_slice(16) == slice(4, 12) and pf.frame_slice(16) == slice(0, 16)
+
+
+# ---------------------------------------------------------------------- precision
+def test_precision_auto_follows_the_per_model_decision(monkeypatch):
+    import bsp_fast.models.lstm as lstm_module
+
+    cls = {n: models.model_class(t, n) for t, n in (("lifting", "baseline_3d"),
+                                                    ("autoencoder", "simple_transformer"),
+                                                    ("lifting", "lstm"),
+                                                    ("lifting", "poseformer"))}
+    native = bool(re.search(r"avx512_bf16|amx_bf16", open("/proc/cpuinfo").read()))
+    if not native:  # this machine: bf16 is emulated, auto is fp32 for every model
+        assert {resolve_precision("auto", "cpu", c) for c in cls.values()} == {"32"}
+    monkeypatch.setattr(lstm_module, "cpu_bf16", lambda: True)
+    got = {n: resolve_precision("auto", "cpu", c) for n, c in cls.items()}
+    assert got == {"baseline_3d": "bf16-mixed", "simple_transformer": "bf16-mixed",
+                   "lstm": "32", "poseformer": "32"}
+    assert resolve_precision("32", "cpu", cls["baseline_3d"]) == "32"
+    monkeypatch.setattr(lstm_module, "cpu_bf16", lambda: False)
+    assert resolve_precision("auto", "cpu", cls["baseline_3d"]) == "32"
+
+
+#: bf16 autocast against float32 on the same weights and clips: relative tolerance
+BF16_TOLERANCE = 0.02
+
+
+@pytest.mark.parametrize("task,name,metric", [("lifting", "baseline_3d", "mpjpe_mm"),
+                                              ("autoencoder", "simple_transformer",
+                                               "pck_0.05")])
+def test_bf16_metrics_stay_within_tolerance_of_fp32(data, task, name, metric):
+    assert models.model_class(task, name).cpu_bf16_faster
+    ds = ClipDataset(data[task], "test", task, noise=5.0)
+    b = ds[:8]
+    torch.manual_seed(0)
+    m = models.create(task, name).eval()
+    values = {}
+    for bf16 in (False, True):
+        with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            out = m.forward_batch(b)
+        tm = TaskMetrics(task)
+        tm.update(out, b, m)
+        values[bf16] = tm.compute()[metric]
+    assert values[True] == pytest.approx(values[False], rel=BF16_TOLERANCE)
+
+
+# ---------------------------------------------------------------------- runs
+def test_seeds_smoke_run_gives_per_seed_values_intervals_and_marks(data, tmp_path, capsys):
+    argv = ["classification", "--data", str(data["classification"]), "--budget", "smoke",
+            "--out", str(tmp_path), "--rows", "lstm-perfect,graph-perfect", "--seeds", "2",
+            "--jobs", "2"]
+    assert R.main(argv) == 0
+    text = capsys.readouterr().out
+    base = tmp_path / "classification-smoke"
+    saved = json.loads((base / "results.json").read_text())
+    assert saved["seeds"] == [22742, 22743] and (base / "curves.png").is_file()
+    for row in ("lstm-perfect", "graph-perfect"):
+        r = saved["results"][row]
+        assert sorted(r["seeds"]) == ["22742", "22743"]
+        for seed, one in r["seeds"].items():  # per-seed runs, with their own config
+            assert one["run"].endswith(f"{row}/seed-{seed}")
+            assert (base / "configs" / f"{row}-seed-{seed}.yaml").is_file()
+            rec = json.loads(open(one["per_recording"]).read())
+            f1 = rec["test"]["metrics"]["f1"]
+            assert sum(f1["num"]) / max(sum(f1["den"]), 1) == pytest.approx(one["metrics"]["f1"])
+        vals = [s["metrics"]["accuracy"] for s in r["seeds"].values()]
+        assert r["metrics"]["accuracy"] == pytest.approx(np.mean(vals))
+        assert r["std"]["accuracy"] == pytest.approx(np.std(vals, ddof=1))
+        low, high = r["interval"]["accuracy"]
+        assert low <= high
+        line = next(ln for ln in text.splitlines() if ln.startswith(f"| {row} |"))
+        assert re.search(r"\d\.\d{3} ± \d\.\d{3} \[\d\.\d{3}, \d\.\d{3}\]", line)
+    first = saved["findings"][0]  # LSTM >= graph on perfect data: judged, with its interval
+    assert first["status"] in ("reproduced", "not reproduced", "inconclusive")
+    lo, hi = first["interval"]
+    assert first["status"] == U.mark(U.Interval(first["difference"], lo, hi, 0), 1)
+    assert re.search(r"\| perfect data: LSTM >= PedestrianGraph \| lstm-perfect − "
+                     r"graph-perfect [+-]\d\.\d{3} \[", text)
+    assert R.main(argv) == 0  # finished runs are reused
+    assert "reusing" in capsys.readouterr().out
+
+
+def test_seeds_options_are_checked(data, tmp_path, capsys):
+    argv = ["lifting", "--data", str(data["lifting"]), "--budget", "smoke", "--out",
+            str(tmp_path)]
+    assert R.main(argv + ["--seeds", "0"]) == 2
+    assert "seeds must be an integer >= 1" in capsys.readouterr().err
+    assert R.main(argv + ["--seeds", "2", "--split-seeds"]) == 2
+    assert "--split-seeds needs a dataset directory" in capsys.readouterr().err
+
+
+FULL_ON_CPU = {"accelerator": "cpu", "limit_batches": 2, "epochs": 1, "max_steps": 2,
+               "precision": "32", "threads": 1, "workers": 0}
+
+
+@pytest.mark.parametrize("table", R.TABLES)
+def test_full_budget_rows_run_two_batches_on_the_cpu(table, data, tmp_path):
+    over = dict(FULL_ON_CPU, **({"crop_size": 32} if table == "pose_estimation" else {}))
+    tab = R.load_table(table)
+    res = R.reproduce(tab, data[table], "full", tmp_path, overrides=over, log=lambda s: 0)
+    assert sorted(res["results"]) == sorted(r["name"] for r in tab["rows"])
+    for name, r in res["results"].items():
+        first = next(iter(tab["metrics"]))
+        assert r["metrics"].get(first) is not None, name
+
+
+def test_split_seeds_set_the_converters_split_seed(tmp_path, capsys):
+    from bsp_testdata import recording, write_dataset
+
+    rows = [r for i in range(10) for r in recording(f"rec{i:02d}", range(48), seed=i)]
+    ds = write_dataset(tmp_path / "ds", rows)
+    argv = ["lifting", "--data", str(ds), "--budget", "smoke", "--out", str(tmp_path / "o"),
+            "--rows", "lstm", "--seeds", "2", "--split-seeds", "--jobs", "1"]
+    assert R.main(argv) == 0
+    saved = json.loads((tmp_path / "o" / "lifting-smoke" / "results.json").read_text())
+    assert saved["split_seeds"] is True
+    tests = {}
+    for seed, one in saved["results"]["lstm"]["seeds"].items():
+        cfg = (tmp_path / "o" / "lifting-smoke" / "configs" / f"lstm-seed-{seed}.yaml").read_text()
+        assert f"split_seed: {seed}" in cfg and f"seed: {seed}" in cfg
+        tests[seed] = json.loads(open(one["per_recording"]).read())["test"]["recordings"]
+    # the converter assigns recordings to splits by their clip counts (deterministic);
+    # split_seed shuffles the clips inside each split: the same test recordings
+    assert tests["22742"] == tests["22743"]
+    capsys.readouterr()
