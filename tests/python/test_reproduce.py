@@ -215,7 +215,7 @@ def test_smoke_run_prints_table_and_consistent_marks(table, data, tmp_path, caps
         cells = [c.strip() for c in row.strip("|").split("|")]
         m = next(iter(tab["metrics"]))
         col = header.index(tab["metrics"][m]["label"])
-        assert cells[col] == R._fmt(tab, m, saved["results"][name]["metrics"][m])
+        assert cells[col] == R.format_value(tab, m, saved["results"][name]["metrics"][m])
     marks = {f["text"]: f["status"] for f in saved["findings"]}
     assert marks == {f["text"]: f["status"] for f in R.evaluate_findings(tab, saved["results"])}
     for f in tab["findings"]:  # every finding is printed, with the status the numbers give

@@ -126,7 +126,7 @@ def test_eval_cli_and_table(runs, capsys, tmp_path):
     for title, header in (
             ("classification", "| model | σ (px) | MJP | F1 | precision | recall | accuracy |"),
             ("autoencoder", "| model | σ (px) | MJP | MJR | PCK@0.05 (%) | PCKhn@0.1 (%) |"),
-            ("lifting", "| model | MPJPE (mm) | N-MPJPE (mm) | PA-MPJPE (mm) | MPJVE (mm) |"),
+            ("lifting", "| model | MPJPE (mm) | N-MPJPE (mm) | PA-MPJPE (mm) | MPJVE (mm/frame) |"),
             ("pose_estimation", "| model | PCK@0.05 (%) | PCKhn@0.1 (%) |")):
         section = text.split(f"### {title} (test)")[1].split("###")[0]
         squeezed = " ".join(section.split())
@@ -136,7 +136,7 @@ def test_eval_cli_and_table(runs, capsys, tmp_path):
     assert mm in text
     assert eval_main(["--table", "--format", "csv", str(run)]) == 0
     rows = capsys.readouterr().out.splitlines()
-    assert rows[0].startswith("task,model,MPJPE (mm),N-MPJPE (mm),PA-MPJPE (mm),MPJVE (mm)")
+    assert rows[0].startswith("task,model,MPJPE (mm),N-MPJPE (mm),PA-MPJPE (mm),MPJVE (mm/frame)")
     assert rows[1].startswith("lifting,initial: mean training pose,") and len(rows) == 3
 
 
