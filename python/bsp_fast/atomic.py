@@ -87,8 +87,9 @@ def publish(tmp, target, *, force: bool = False) -> None:
             appeared = exc
         if not force:  # another writer published it since the caller checked
             raise appeared
-    elif not force:
-        raise FileExistsError(f"{target} exists; pass --force to replace it")
+    elif not force:  # the callers checked before writing: it appeared meanwhile
+        raise FileExistsError(f"{target} appeared while this output was written; refusing "
+                              "to replace it (pass --force to replace it)")
     if not tmp.is_dir() or not target.is_dir() or target.is_symlink():
         if target.is_dir() and not target.is_symlink():
             raise IsADirectoryError(f"{target} is a folder; refusing to replace it with a file")

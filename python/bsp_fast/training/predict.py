@@ -31,7 +31,7 @@ import numpy as np
 
 from . import config as C
 from ..atomic import atomic_output
-from .runs import RunError
+from .runs import RunError, refuse_unsafe_output
 
 __all__ = ["predict", "main", "PredictResult"]
 
@@ -116,6 +116,9 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
         raise ValueError(f"accelerator must be one of {list(C.ACCELERATORS)}, got "
                          f"{accelerator!r}")
     out = Path(out)
+    if out.is_dir():
+        raise RunError(f"{out} is a folder; the predictions are one HDF5 file (give a "
+                       "file name, e.g. predictions.h5)", code=2)
     if out.exists() and not force:
         raise RunError(f"{out} exists; pass --force to overwrite it", code=3)
     if accelerator == "gpu" and not torch.cuda.is_available():
@@ -123,6 +126,9 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
     module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size,
                                      workers=workers, noise=noise, mjp=mjp)
     dm = make_datamodule(cfg, h5)
+    # never overwrite what predictions are made from, through links too
+    refuse_unsafe_output(out, force=True, inputs=[ckpt, h5, dm.h5_path, cfg.get("data")],
+                         in_place=out)
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
     loader = dm.test_dataloader() if split == "test" else dm.val_dataloader()
     L = dm.datasets[split].clip_length

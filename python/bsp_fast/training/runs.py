@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -83,8 +84,66 @@ class RunDirectory:
     def commit(self) -> None:
         if self.committed:
             return
-        publish(self.tmp, self.final, force=self.force)
+        try:
+            publish(self.tmp, self.final, force=self.force)
+        except FileExistsError as exc:  # another run published the same --out meanwhile
+            raise RunError(f"{exc}; this run is left in {self.tmp}", code=3) from None
         self.committed = True
+
+
+def is_run_directory(path) -> bool:
+    """Whether ``path`` is a folder ``bsp-train`` wrote: ``checkpoints/`` and a
+    ``config.yaml`` naming a task and a model (a dataset's config.yaml names neither)."""
+    import yaml
+
+    p = Path(path)
+    if p.is_symlink() or not (p / "checkpoints").is_dir() or not (p / "config.yaml").is_file():
+        return False
+    try:
+        cfg = yaml.safe_load((p / "config.yaml").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return False
+    return isinstance(cfg, dict) and "task" in cfg and "model" in cfg
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def refuse_unsafe_output(out, *, force: bool, inputs=(), in_place=None) -> None:
+    """Checks a run's output folder before any work (``RunError`` with exit code 2 or 3):
+
+    * it must not be, or hold, one of the run's ``inputs`` (the dataset folder, its
+      data.csv, the HDF5 file, a --config file, a checkpoint to start from), through
+      symlinks and hard links too;
+    * an existing ``out`` is replaced only with ``force`` (else code 3), and only when it is
+      an earlier run directory (:func:`is_run_directory`) or ``in_place`` (the run being
+      resumed): ``--force`` never deletes a folder or file bsp-train did not write.
+    """
+    out = Path(out)
+    real = Path(os.path.realpath(out))
+    for inp in inputs:
+        if inp is None:
+            continue
+        inp = Path(inp)
+        r = Path(os.path.realpath(inp))
+        if r == real or real in r.parents or (out.exists() and _same(out, inp)):
+            raise RunError(f"--out {out} is or holds the run's input {inp}; refusing to "
+                           "write there (choose another --out)", code=2)
+    if not (out.exists() or out.is_symlink()):
+        return
+    if in_place is not None and real == Path(os.path.realpath(in_place)):
+        return
+    if not force:
+        raise RunError(f"{out} exists; pass --force to replace it (or --resume it)", code=3)
+    if not is_run_directory(out):
+        what = "a folder" if out.is_dir() else "a file"
+        raise RunError(f"--out {out} is {what} that bsp-train did not write (no "
+                       "checkpoints/ and run config.yaml); --force replaces only an earlier "
+                       "run directory", code=2)
 
 
 def resolve_checkpoint(path, which: str = "best") -> tuple:

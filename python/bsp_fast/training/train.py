@@ -14,7 +14,7 @@ from pathlib import Path
 
 from . import config as C
 from .runs import ENV_TMP, RunDirectory, RunError, default_run_dir, read_run, \
-    resolve_checkpoint, write_json
+    refuse_unsafe_output, resolve_checkpoint, write_json
 from .precision import check_precision, native_bf16, resolve_precision
 from .tasks import get_task
 
@@ -218,6 +218,10 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
     from .tasks import TASK_MODULES
 
     shared = _shared_tmp(cfg)
+    in_place = resume["run_dir"] if resume is not None else None
+    if not os.environ.get(ENV_TMP):  # before any work: --force never replaces an input
+        refuse_unsafe_output(cfg["out"], force=cfg["force"],
+                             inputs=_inputs(cfg, resume, config_path), in_place=in_place)
     started = max(int(os.environ.get(k, "0")) if os.environ.get(k, "").isdigit() else 0
                   for k in ("RANK", "NODE_RANK"))  # > 0: not the first process/machine
     if shared and started > 0 and not os.environ.get(ENV_TMP):
@@ -252,6 +256,8 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
         return None
     final = Path(cfg["out"])
     copy_from = resume["run_dir"] if resume is not None else None
+    refuse_unsafe_output(final, force=cfg["force"], inputs=_inputs(cfg, resume, config_path),
+                         in_place=copy_from)  # again: the output may have appeared meanwhile
     with RunDirectory(final, force=cfg["force"], copy_from=copy_from, tmp_name=shared) as tmp:
         if copy_from is not None:
             ckpt_path = tmp / "checkpoints" / "last.ckpt"
@@ -283,6 +289,13 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
             os.environ.pop(ENV_TMP, None)
         result = _finish(cfg, tmp, final, trainer, initial, precision, seconds)
     return result
+
+
+def _inputs(cfg: dict, resume, config_path=None) -> list:
+    """What a run reads and ``--out`` must never replace: the data (folder, data.csv or
+    HDF5 file), the --config file and the checkpoint it starts from."""
+    return [cfg.get("data"), config_path,
+            resume["ckpt"] if resume is not None and resume["run_dir"] is None else None]
 
 
 def _initial(cfg: dict, dm, model=None) -> dict:
