@@ -10,7 +10,7 @@
 #include "bsp/clips/clips.hpp"
 #include "bsp/conversion/convert.hpp"
 #include "bsp/csv/csv.hpp"
-#include "bsp/hdf5/h5.hpp"
+#include "hdf5/h5.hpp"
 
 namespace bsp::detail {
 

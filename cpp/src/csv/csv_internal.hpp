@@ -124,6 +124,12 @@ inline const char* skip_spaces(const char* p, const char* end) {
 // digit), then fast_float's own Eisel-Lemire step (compute_float, to_float) rounds the
 // decimal to float32, so the result is bit-identical to fast_float::from_chars, which
 // handles everything else: exponents, nan/inf, >19 digits, the last bytes of a line.
+// Those three functions are fast_float internals (no API promise): CMakeLists.txt sets
+// BSP_FAST_FLOAT_INTERNALS only for the fast_float versions this was tested with; with any
+// other, every number goes through the documented from_chars (same values, ~20 % slower).
+#ifndef BSP_FAST_FLOAT_INTERNALS
+#define BSP_FAST_FLOAT_INTERNALS 0
+#endif
 [[gnu::noinline, gnu::cold]] inline bool parse_float_generic(const char*& p, const char* end,
                                                             float& out) {
   const auto r = fast_float::from_chars(p, end, out);
@@ -132,6 +138,7 @@ inline const char* skip_spaces(const char* p, const char* end) {
   return true;
 }
 
+#if BSP_FAST_FLOAT_INTERNALS
 inline std::uint64_t load8(const char* p) {
   std::uint64_t v;
   std::memcpy(&v, p, 8);
@@ -173,8 +180,10 @@ inline unsigned append_fraction(const char* f, unsigned int_digits, std::uint64_
   return 0;
 }
 
+#endif  // BSP_FAST_FLOAT_INTERNALS
+
 [[gnu::always_inline]] inline bool parse_float(const char*& p, const char* end, float& out) {
-#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+#if BSP_FAST_FLOAT_INTERNALS && defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
   if (end - p < 48) return parse_float_generic(p, end, out);  // loads read < 48 bytes ahead
   const char* s = p + (*p == '-');
   const std::uint64_t head = load8(s);
