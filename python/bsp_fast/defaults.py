@@ -2,8 +2,9 @@
 DataModule, the training options and the docs read them from here).
 
 The C++ core keeps its own copy of the conversion defaults in
-``cpp/include/bsp/clips/clips.hpp`` (``PlanOptions``); ``tests/python/test_convert.py``
-checks that the two agree.
+``cpp/include/bsp/clips/clips.hpp`` (``ClipOptions``) and
+``cpp/include/bsp/conversion/convert.hpp`` (``ConvertOptions``, ``MediaOptions``), returned by
+``_core.convert_defaults()``; ``tests/python/test_convert.py`` checks that the two agree.
 """
 from __future__ import annotations
 

@@ -1,9 +1,12 @@
-// Shared utilities: the deterministic parallel-for, the thread setting, the typed errors and
-// the library versions.
+// Shared utilities: the deterministic parallel-for, the thread setting, the typed errors,
+// the library versions and the temp-then-rename helper.
 #include <doctest/doctest.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <atomic>
+#include <filesystem>
+#include <fstream>
 #include <mutex>
 #include <stdexcept>
 #include <string>
@@ -14,6 +17,8 @@
 #include "bsp/common/diagnostics.hpp"
 #include "bsp/common/errors.hpp"
 #include "bsp/common/parallel.hpp"
+#include "common/atomic_file.hpp"
+#include "testing.hpp"
 
 using namespace bsp;
 
@@ -100,4 +105,59 @@ TEST_CASE("library_versions names the core and every library it links") {
                           "opencv", "hdf5", "eigen", "assimp", "libdeflate", "compiler"})
     CHECK_MESSAGE(!v.at(lib).empty(), lib);
   CHECK(v.at("hdf5").find('.') != std::string::npos);
+}
+
+namespace {
+std::vector<std::string> names_in(const std::filesystem::path& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) names.push_back(e.path().filename());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+}  // namespace
+
+TEST_CASE("AtomicFile: hidden .NAME.tmp-PID-N beside the target, renamed on commit") {
+  testing::TempDir tmp;
+  const std::string target = tmp.path("out.bin");
+  const std::string prefix = ".out.bin.tmp-" + std::to_string(::getpid()) + "-";
+  AtomicFile a(target), b(target);
+  CHECK(a.target() == target);
+  CHECK(std::filesystem::path(a.path()).parent_path() == tmp.dir);
+  const std::string name = std::filesystem::path(a.path()).filename();
+  CHECK(name.rfind(prefix, 0) == 0);
+  CHECK(name.size() > prefix.size());
+  CHECK(a.path() != b.path());  // N counts up
+  CHECK(temp_name_for("plain") .rfind(".plain.tmp-", 0) == 0);  // no folder: the working one
+  std::ofstream(a.path()) << "complete";
+  CHECK(names_in(tmp.dir) == std::vector<std::string>{name});
+  REQUIRE(a.commit() == 0);
+  CHECK(names_in(tmp.dir) == std::vector<std::string>{"out.bin"});
+  std::ifstream in(target);
+  std::string text;
+  in >> text;
+  CHECK(text == "complete");
+  CHECK(a.commit() != 0);  // nothing left to commit
+}
+
+TEST_CASE("AtomicFile: destroyed or moved-over without commit, it deletes its temporary file") {
+  testing::TempDir tmp;
+  const std::string target = tmp.path("out.bin");
+  std::ofstream(target) << "old";
+  {
+    AtomicFile a(target);
+    std::ofstream(a.path()) << "partial";
+    CHECK(names_in(tmp.dir).size() == 2);
+  }
+  CHECK(names_in(tmp.dir) == std::vector<std::string>{"out.bin"});  // the old output untouched
+  AtomicFile moved;
+  {
+    AtomicFile a(target);
+    std::ofstream(a.path()) << "partial";
+    moved = std::move(a);  // ownership moves: a's destructor leaves the file alone
+  }
+  CHECK(names_in(tmp.dir).size() == 2);
+  moved = AtomicFile();  // assigning over it deletes the file it owned
+  CHECK(names_in(tmp.dir) == std::vector<std::string>{"out.bin"});
+  AtomicFile c(tmp.path("missing/out.bin"));  // rename fails: errno comes back
+  CHECK(c.commit() == ENOENT);
 }

@@ -1,4 +1,4 @@
-// The HDF5 writer (bsp/hdf5/h5.hpp): what it writes is read back through the libhdf5 C API;
+// The HDF5 writer (private hdf5/h5.hpp): what it writes is read back through the libhdf5 C API;
 // failures name the file and the object.
 #include <doctest/doctest.h>
 
@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "bsp/common/errors.hpp"
-#include "bsp/hdf5/h5.hpp"
+#include "hdf5/h5.hpp"
 #include "testing.hpp"
 
 using namespace bsp;

@@ -81,6 +81,29 @@ def test_round_trip_values(ds, tmp_path):
         assert f["train/meta/pedestrian_id"].asstr()[0] == "0_0"
 
 
+def test_cpp_conversion_defaults_equal_python_defaults():
+    """The C++ core's defaults (ClipOptions, ConvertOptions, MediaOptions) and
+    bsp_fast.defaults.CONVERT are two copies of one set of values: they must not drift."""
+    from bsp_fast._native import core
+    from bsp_fast.defaults import CONVERT, SEED
+
+    cpp = core.convert_defaults()
+    assert set(cpp) == {"clip_length", "val_frac", "test_frac", "seed", "fov", "crop_size"}
+    assert cpp == {k: CONVERT[k] for k in cpp}
+    assert cpp["seed"] == SEED
+
+
+def test_source_crc32_and_bytes_are_those_of_data_csv(ds, tmp_path):
+    import zlib
+
+    data = (ds / "data.csv").read_bytes()
+    r = cv.convert(ds, tmp_path / "o.h5", clip_length=10, media=False, threads=2)
+    assert (r["source_crc32"], r["source_bytes"]) == (zlib.crc32(data), len(data))
+    with h5py.File(tmp_path / "o.h5") as f:
+        assert f.attrs["source_crc32"] == zlib.crc32(data)
+        assert f.attrs["source_bytes"] == len(data)
+
+
 def test_every_recording_in_one_split_and_class_counts(ds, tmp_path):
     d = read_all(cv.convert(ds, tmp_path / "a.h5", clip_length=10, media=False)["output"])
     owners = {}

@@ -58,10 +58,11 @@ int main(int argc, char** argv) {
   }
 
   // Cancelled runs: another thread sets `cancel` once the conversion reaches `stage`
-  // (0 read, 5 check media, 6 media frames, ...); convert_csv must join its workers and
+  // (read, check_media, media, ...); convert_csv must join its workers and
   // throw "conversion cancelled" (or finish, when the stage came and went too fast).
   int cancelled = 0;
-  for (int stage : {0, 1, 3, 5, 6}) {
+  using S = bsp::ConvertStage;
+  for (S stage : {S::read, S::plan, S::write, S::check_media, S::media}) {
     bsp::ConvertProgress progress;
     std::atomic<bool> done{false};
     std::thread canceller([&] {
@@ -69,7 +70,7 @@ int main(int argc, char** argv) {
         std::this_thread::sleep_for(std::chrono::microseconds(200));
       progress.cancel.store(true);
     });
-    const std::string path = out + "/cancel" + std::to_string(stage) + ".h5";
+    const std::string path = out + "/cancel" + std::to_string(static_cast<int>(stage)) + ".h5";
     try {
       bsp::convert_csv(csv, path, options(dataset, threads), &progress);
     } catch (const bsp::Error& e) {

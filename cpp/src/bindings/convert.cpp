@@ -48,6 +48,17 @@ py::dict report_dict(const ConvertReport& r) {
   return d;
 }
 
+py::dict convert_defaults() {
+  const ConvertOptions o;
+  py::dict d;
+  d["clip_length"] = o.clips.length;
+  d["val_frac"] = o.clips.val_frac, d["test_frac"] = o.clips.test_frac;
+  d["seed"] = o.clips.seed;
+  d["fov"] = o.fov;
+  d["crop_size"] = o.media.crop_size;
+  return d;
+}
+
 py::dict convert(const std::string& csv, const std::string& out, ConvertProgress* progress,
                  py::kwargs kw) {
   py::dict d(kw);
@@ -127,10 +138,29 @@ py::array crop_resize_py(const CArray<std::uint8_t>& image, const CArray<float>&
 BSP_BINDING(convert) {
   using namespace bsp::py_bind;
   namespace py = pybind11;
+  using Stage = bsp::ConvertStage;
+  py::enum_<Stage>(m, "ConvertStage", "What a running conversion is doing (ConvertProgress.stage).")
+      .value("read", Stage::read, "reading data.csv (done/total: rows)")
+      .value("plan", Stage::plan, "planning clips")
+      .value("verify", Stage::verify, "verifying the poses")
+      .value("write", Stage::write, "writing the clips (done/total: clips)")
+      .value("done", Stage::done, "finished")
+      .value("check_media", Stage::check_media, "opening the media files (done/total: files)")
+      .value("media", Stage::media, "cropping the media frames (done/total: frames)");
+  using Phase = bsp::FailurePhase;
+  py::enum_<Phase>(m, "FailurePhase", py::arithmetic(),
+                   "When a shard met a media failure; failures sorted by (phase, order) come "
+                   "in the order the one-process converter meets them.")
+      .value("open", Phase::open, "while opening the files")
+      .value("decode", Phase::decode, "while decoding");
+  m.def("convert_defaults", &convert_defaults,
+        "The C++ core's conversion defaults (clips, split, seed, fov, crop size); "
+        "bsp_fast.defaults.CONVERT must agree (tested).");
   py::class_<bsp::ConvertProgress>(m, "ConvertProgress",
                                    "Counters a running conversion updates; poll from Python.")
       .def(py::init<>())
-      .def_property_readonly("stage", [](const bsp::ConvertProgress& p) { return p.stage.load(); })
+      .def_property_readonly("stage", [](const bsp::ConvertProgress& p) { return p.stage.load(); },
+                             "The ConvertStage the conversion is in.")
       .def_property_readonly("done", [](const bsp::ConvertProgress& p) { return p.done.load(); })
       .def_property_readonly("total", [](const bsp::ConvertProgress& p) { return p.total.load(); })
       .def("cancel", [](bsp::ConvertProgress& p) { p.cancel = true; },

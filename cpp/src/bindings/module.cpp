@@ -59,6 +59,27 @@ PYBIND11_MODULE(_core, m) {
   py::register_exception<bsp::ApngError>(m, "ApngError", base.ptr());
   py::register_exception<bsp::Hdf5Error>(m, "Hdf5Error", base.ptr());
   py::register_exception<bsp::MotionError>(m, "MotionError", base.ptr());
+  // Exceptions carried as values (a shard's media failure) are raised again by type.
+  using Kind = bsp::ErrorKind;
+  py::enum_<Kind>(m, "ErrorKind", "The type of an exception carried as a value.")
+      .value("Error", Kind::Error)
+      .value("CsvParseError", Kind::CsvParseError)
+      .value("VideoDecodeError", Kind::VideoDecodeError)
+      .value("VideoEncodeError", Kind::VideoEncodeError)
+      .value("ApngError", Kind::ApngError)
+      .value("Hdf5Error", Kind::Hdf5Error)
+      .value("MotionError", Kind::MotionError)
+      .value("ValueError", Kind::ValueError)
+      .value("MemoryError", Kind::MemoryError)
+      .value("RuntimeError", Kind::RuntimeError);
+  m.def("raise_error", [](Kind kind, const std::string& message) {
+        if (kind == Kind::MemoryError) {  // std::bad_alloc has no message to carry
+          PyErr_SetString(PyExc_MemoryError, message.c_str());
+          throw py::error_already_set();
+        }
+        bsp::throw_error(kind, message);
+      }, py::arg("kind"), py::arg("message"),
+      "Raises the exception of `kind` (the same Python type the core raises) with `message`.");
 
   m.def("library_versions", &bsp::library_versions,
         "Versions of the C/C++ libraries the core is linked with.");

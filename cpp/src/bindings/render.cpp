@@ -1,5 +1,7 @@
 // The bsp-synth ray caster. Scenes arrive as flat float64 tables (one row per primitive,
-// columns documented in each docstring); bsp_fast/synth/render.py builds them.
+// columns documented in each docstring); bsp_fast/synth/scene.py builds them and
+// bsp_fast/synth/clip.py calls these. Only type conversion here: the core checks the
+// options (bsp::render::check_scene, check_camera, check_lighting).
 #include <cmath>
 #include <string>
 
@@ -30,10 +32,7 @@ rd::Lighting make_light(const CArray<double>& light) {
   if (light.size() != 12)
     throw py::value_error("light: expected 12 values, got " + shape_str(light));
   const double* L = light.data();
-  const rd::Lighting out{v3(L), L[3], L[4], v3(L + 5), v3(L + 8), L[11]};
-  if (!(out.fog_distance > 0)) throw py::value_error("light: fog distance must be > 0");
-  if (!(out.sun.norm() > 0)) throw py::value_error("light: sun direction must be non-zero");
-  return out;
+  return rd::Lighting{v3(L), L[3], L[4], v3(L + 5), v3(L + 8), L[11]};
 }
 
 rd::Scene make_scene(const CArray<double>& road, const CArray<double>& bands,
@@ -49,11 +48,11 @@ rd::Scene make_scene(const CArray<double>& road, const CArray<double>& bands,
   }
   for (std::size_t i = 0, n = rows(boxes, 12, "boxes"); i < n; ++i) {
     const double* r = boxes.data() + 12 * i;
-    if (!(r[10] >= 0 && r[10] <= 3))
-      throw py::value_error("boxes row " + std::to_string(i) + ": pattern must be 0..3");
+    // A pattern is a whole number; anything else becomes -1, which the core refuses.
+    const bool whole = r[10] == std::floor(r[10]) && std::fabs(r[10]) < 1e9;
     sc.boxes.push_back({v3(r).cwiseMin(v3(r + 3)), v3(r).cwiseMax(v3(r + 3)),
                         tag_of(r[6], "boxes", i), v3(r + 7),
-                        static_cast<rd::Pattern>(static_cast<int>(r[10])), r[11]});
+                        static_cast<rd::Pattern>(whole ? static_cast<int>(r[10]) : -1), r[11]});
   }
   for (std::size_t i = 0, n = rows(cyls, 10, "cylinders"); i < n; ++i) {
     const double* r = cyls.data() + 10 * i;
@@ -69,8 +68,6 @@ rd::Scene make_scene(const CArray<double>& road, const CArray<double>& bands,
 
 rd::Camera make_camera(const CArray<double>& cam, int width, int height, double fov) {
   if (cam.size() != 6) throw py::value_error("camera: expected 6 values, got " + shape_str(cam));
-  if (width <= 0 || height <= 0 || !(fov > 0 && fov < 180))
-    throw py::value_error("camera: need width > 0, height > 0 and 0 < fov < 180");
   return rd::Camera{transform_from_array(cam.data()),
                     Intrinsics{static_cast<double>(width), static_cast<double>(height), fov}};
 }
@@ -82,6 +79,8 @@ py::tuple render_background(const CArray<double>& road, const CArray<double>& ba
                             int threads) {
   const rd::Scene sc = make_scene(road, bands, boxes, cyls, spheres, light);
   const rd::Camera cam = make_camera(camera, width, height, fov);
+  rd::check_scene(sc);  // before the outputs are sized from the camera
+  rd::check_camera(cam);
   auto rgb = empty<std::uint8_t>({height, width, 3});
   auto tags = empty<std::uint8_t>({height, width});
   auto depth = empty<float>({height, width});
@@ -110,6 +109,8 @@ py::tuple render_bodies(const CArray<std::uint8_t>& bg_rgb, const CArray<std::ui
     throw py::value_error("colours: expected shape (P, 3), got " + shape_str(colours));
   const rd::Camera cam = make_camera(camera, static_cast<int>(W), static_cast<int>(H), fov);
   const rd::Lighting lit = make_light(light);
+  rd::check_camera(cam);
+  rd::check_lighting(lit);
   std::vector<rd::Capsule> caps(static_cast<std::size_t>(frames * P));
   for (std::size_t k = 0; k < caps.size(); ++k) {
     const double* c = capsules.data() + 7 * k;

@@ -2,10 +2,11 @@
 
 #include <Eigen/Core>
 #include <assimp/version.h>
-#include <hdf5.h>
 #include <libdeflate.h>
 #include <opencv2/core/version.hpp>
 #include <opencv2/core/utility.hpp>
+
+#include "hdf5/h5.hpp"
 
 extern "C" {
 #include <libavcodec/avcodec.h>
@@ -31,9 +32,7 @@ std::map<std::string, std::string> library_versions() {
   v["libavutil"] = av_ver(avutil_version());
   v["libswscale"] = av_ver(swscale_version());
   v["opencv"] = cv::getVersionString();
-  unsigned maj = 0, min = 0, rel = 0;
-  H5get_libversion(&maj, &min, &rel);
-  v["hdf5"] = std::to_string(maj) + "." + std::to_string(min) + "." + std::to_string(rel);
+  v["hdf5"] = h5::library_version();
   v["eigen"] = std::to_string(EIGEN_WORLD_VERSION) + "." + std::to_string(EIGEN_MAJOR_VERSION) +
                "." + std::to_string(EIGEN_MINOR_VERSION);
   v["assimp"] = std::to_string(aiGetVersionMajor()) + "." + std::to_string(aiGetVersionMinor()) +

@@ -1,16 +1,9 @@
 #include "bsp/conversion/convert.hpp"
 #include "bsp/csv/columns.hpp"
 
-#include <fcntl.h>
-#include <libdeflate.h>
-#include <sys/mman.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <filesystem>
 #include <set>
 #include <stdexcept>
@@ -26,36 +19,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-// CRC-32 of the whole file through mmap (libdeflate's CRC runs at several GB/s). Pages are
-// dropped from the mapping every 16 MB so a multi-GB data.csv does not count against the
-// process's resident memory.
-std::uint32_t file_crc32(const std::string& path, std::uint64_t& bytes) {
-  const int fd = ::open(path.c_str(), O_RDONLY);
-  if (fd < 0) throw Error("cannot open " + path + ": " + std::strerror(errno));
-  struct stat st {};
-  ::fstat(fd, &st);
-  bytes = static_cast<std::uint64_t>(st.st_size);
-  std::uint32_t crc = 0;
-  if (bytes) {
-    void* p = ::mmap(nullptr, bytes, PROT_READ, MAP_PRIVATE, fd, 0);
-    if (p == MAP_FAILED) {
-      ::close(fd);
-      throw Error("cannot mmap " + path + ": " + std::strerror(errno));
-    }
-    ::madvise(p, bytes, MADV_SEQUENTIAL);
-    constexpr std::uint64_t kStep = std::uint64_t{16} << 20;  // a multiple of the page size
-    auto* base = static_cast<unsigned char*>(p);
-    for (std::uint64_t at = 0; at < bytes; at += kStep) {
-      const std::uint64_t n = std::min(kStep, bytes - at);
-      crc = libdeflate_crc32(crc, base + at, n);
-      ::madvise(base + at, n, MADV_DONTNEED);
-    }
-    ::munmap(p, bytes);
-  }
-  ::close(fd);
-  return crc;
 }
 
 std::vector<std::string> needed_columns(bool media) {
@@ -238,7 +201,7 @@ std::vector<detail::MediaFailure> write_output(const std::string& out_path, cons
   if (progress) {
     progress->done = 0;
     progress->total = clips[0]->size() + clips[1]->size() + clips[2]->size();
-    progress->stage = 3;
+    progress->stage = ConvertStage::write;
   }
   h5::File file = h5::File::create(out_path);
   const h5::Group root = file.root();
@@ -260,7 +223,7 @@ std::vector<detail::MediaFailure> write_output(const std::string& out_path, cons
     if (progress) {
       progress->done = 0;
       progress->total = media->tables[0].frames() + media->tables[1].frames() + media->tables[2].frames();
-      progress->stage = 6;
+      progress->stage = ConvertStage::media;
     }
     ConvertOptions mo = opt;
     mo.media.skip_bad_media = opt.media.skip_bad_media || keep_failures;
@@ -272,22 +235,31 @@ std::vector<detail::MediaFailure> write_output(const std::string& out_path, cons
   return failed;
 }
 
-// Plans the media of a pass and opens every file. Returns the failures (thrown without
-// skip_bad_media) and fills `media` when there are none.
-std::vector<detail::MediaFailure> plan_media(const PoseTable& table, const Plan& plan,
-                                             const std::string& root, const ConvertOptions& opt,
-                                             MediaPlan& media, ConvertProgress* progress) {
-  media.files = detail::media_files(table, plan, root);  // refuses unsafe paths first
-  for (int s = 0; s < 3; ++s)
-    media.tables[s] = detail::plan_frame_table(plan, plan.splits[s], opt.clips.length);
-  auto failed = detail::check_media(table, media.tables, media.files, opt.threads, progress);
-  if (!failed.empty() && !opt.media.skip_bad_media) std::rethrow_exception(failed.front().error);
-  return failed;
+// One planning pass, shared by convert_csv and convert_shard: the clips without the
+// `excluded` recordings (their counts into `report`) and, with media, the files of every
+// planned recording (unsafe paths refused first) and the frame table of each split.
+struct Pass {
+  Plan plan;
+  MediaPlan media;
+};
+Pass plan_pass(const PoseTable& table, const std::set<RecordingKey>& excluded,
+               const std::string& csv_path, const ConvertOptions& opt, ConvertReport& report) {
+  const auto t0 = Clock::now();
+  Pass pass;
+  pass.plan = plan_excluding(table, opt.clips, excluded);
+  fill_report(report, table, pass.plan);
+  if (opt.media.enabled) {
+    pass.media.files = detail::media_files(table, pass.plan, media_root(csv_path));
+    for (int s = 0; s < 3; ++s)
+      pass.media.tables[s] = detail::plan_frame_table(pass.plan, pass.plan.splits[s], opt.clips.length);
+  }
+  report.seconds["plan"] = since(t0);
+  return pass;
 }
 
 void verify(const PoseTable& table, const Plan& plan, const ConvertOptions& opt,
             ConvertReport& report, ConvertProgress* progress) {
-  if (progress) progress->stage = 2;
+  if (progress) progress->stage = ConvertStage::verify;
   const auto t0 = Clock::now();
   report.verify = detail::verify_recordings(table, plan, opt.fov, opt.threads);
   for (const VerifyRow& v : report.verify)
@@ -310,31 +282,28 @@ ConvertReport convert_shard(const std::string& csv_path, const std::string& out_
                             const PoseTable& table, ConvertReport report,
                             const std::set<RecordingKey>& excluded, const ConvertOptions& opt,
                             ConvertProgress* progress) {
-  auto t0 = Clock::now();
-  const Plan plan = plan_excluding(table, opt.clips, excluded);
-  fill_report(report, table, plan);
-  report.seconds["plan"] = since(t0);
+  const Pass pass = plan_pass(table, excluded, csv_path, opt, report);
+  const Plan& plan = pass.plan;
   const int L = opt.clips.length;
-  std::array<detail::FrameTable, 3> full;
-  MediaPlan media;
-  if (opt.media.enabled) {
-    media.files = detail::media_files(table, plan, media_root(csv_path));  // unsafe paths first
-    for (int s = 0; s < 3; ++s) full[s] = detail::plan_frame_table(plan, plan.splits[s], L);
-  }
-  const detail::ShardParts parts = detail::shard_parts(plan, full, opt.shard.index, opt.shard.count);
+  const detail::ShardParts parts =
+      detail::shard_parts(plan, pass.media.tables, opt.shard.index, opt.shard.count);
   std::array<std::vector<Clip>, 3> clips;
+  MediaPlan media;  // this shard's blocks of the frame tables
+  media.files = pass.media.files;
   for (std::size_t s = 0; s < 3; ++s) {
     const auto [c0, c1] = parts.clips[s];
     clips[s].assign(plan.splits[s].begin() + static_cast<std::ptrdiff_t>(c0),
                     plan.splits[s].begin() + static_cast<std::ptrdiff_t>(c1));
-    if (opt.media.enabled) media.tables[s] = detail::slice_table(full[s], parts.blocks[s], parts.clips[s], L);
+    if (opt.media.enabled)
+      media.tables[s] = detail::slice_table(pass.media.tables[s], parts.blocks[s], parts.clips[s], L);
   }
   if (opt.media.enabled) {
-    t0 = Clock::now();
+    const auto t0 = Clock::now();
     auto failed = detail::check_media(table, media.tables, media.files, opt.threads, progress);
     report.media.check_seconds = since(t0);
     for (const auto& f : failed)
-      report.shard_failures.push_back({0, f.recording, left_out(table, plan, f), detail::error_kind(f.error)});
+      report.shard_failures.push_back({FailurePhase::open, f.recording, left_out(table, plan, f),
+                                       error_kind(f.error)});
     if (!failed.empty()) return report;
   }
   check_cancel(progress);
@@ -351,12 +320,13 @@ ConvertReport convert_shard(const std::string& csv_path, const std::string& out_
         order = (std::uint64_t{s} << 32) |
                 (parts.blocks[s].first + static_cast<std::uint64_t>(it - recs.begin()));
     }
-    report.shard_failures.push_back({1, order, left_out(table, plan, f), detail::error_kind(f.error)});
+    report.shard_failures.push_back({FailurePhase::decode, order, left_out(table, plan, f),
+                                     error_kind(f.error)});
   }
   for (std::size_t s = 0; s < 3; ++s) report.media.frames[s] = media.tables[s].frames();
   report.media.seconds = report.media.check_seconds + (opt.media.enabled ? report.seconds["media"] : 0.0);
   report.media.passes = 1;
-  if (progress) progress->stage = 4;
+  if (progress) progress->stage = ConvertStage::done;
   return report;
 }
 
@@ -378,15 +348,16 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
   check_media_options(opt.media);
   ConvertReport base;
   auto t0 = Clock::now();
-  base.source_crc32 = file_crc32(csv_path, base.source_bytes);
   CsvReadOptions ro;
   ro.columns = needed_columns(opt.media.enabled);
   ro.threads = opt.threads;
-  if (progress) ro.rows_total = &progress->total, ro.rows_done = &progress->done;  // stage 0: rows
+  if (progress) ro.rows_total = &progress->total, ro.rows_done = &progress->done;  // read: rows
   const PoseTable table = read_pose_csv(csv_path, ro);
   check_utf8(table);  // ids and paths reach Python and HDF5 as text
+  base.source_crc32 = table.file_crc32;  // computed while the reader scanned the file
+  base.source_bytes = table.file_bytes;
   base.seconds["read"] = since(t0);
-  if (progress) progress->done = table.rows, progress->stage = 1;
+  if (progress) progress->done = table.rows, progress->stage = ConvertStage::plan;
 
   std::set<RecordingKey> excluded;
   std::vector<BadMedia> bad;
@@ -402,15 +373,14 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
   for (int writes = 1;;) {
     check_cancel(progress);
     ConvertReport report = base;
-    t0 = Clock::now();
-    const Plan plan = plan_excluding(table, opt.clips, excluded);
-    fill_report(report, table, plan);
-    report.seconds["plan"] = since(t0);
-    MediaPlan media;
+    const Pass pass = plan_pass(table, excluded, csv_path, opt, report);
+    const Plan& plan = pass.plan;
+    const MediaPlan& media = pass.media;
     if (opt.media.enabled) {
       t0 = Clock::now();
-      auto failed = plan_media(table, plan, media_root(csv_path), opt, media, progress);
+      auto failed = detail::check_media(table, media.tables, media.files, opt.threads, progress);
       check_seconds += since(t0);
+      if (!failed.empty() && !opt.media.skip_bad_media) std::rethrow_exception(failed.front().error);
       if (!failed.empty()) {
         exclude(plan, failed, excluded, bad);
         continue;
@@ -432,7 +402,7 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
     report.media.check_seconds = check_seconds;
     report.media.seconds = check_seconds + (opt.media.enabled ? report.seconds["media"] : 0.0);
     report.media.passes = writes;
-    if (progress) progress->stage = 4;
+    if (progress) progress->stage = ConvertStage::done;
     return report;
   }
 }

@@ -10,7 +10,7 @@
 #include "bsp/clips/clips.hpp"
 #include "bsp/conversion/convert.hpp"
 #include "bsp/csv/csv.hpp"
-#include "bsp/hdf5/h5.hpp"
+#include "hdf5/h5.hpp"
 
 namespace bsp::detail {
 
@@ -109,7 +109,5 @@ ShardParts shard_parts(const Plan& plan, const std::array<FrameTable, 3>& tables
 // The blocks and the clips' clip_frames (still numbered in the whole table) of one shard.
 FrameTable slice_table(const FrameTable& full, std::pair<std::size_t, std::size_t> blocks,
                        std::pair<std::size_t, std::size_t> clips, int L);
-// The Python class name of the exception in `e` (bsp_fast.<name> or a builtin).
-std::string error_kind(const std::exception_ptr& e);
 
 }  // namespace bsp::detail

@@ -162,7 +162,8 @@ std::vector<MediaFailure> check_media(const PoseTable& t, const std::array<Frame
   std::sort(items.begin(), items.end(), [](const Item& a, const Item& b) {
     return a.table->recordings[a.block] < b.table->recordings[b.block];
   });
-  if (progress) progress->done = 0, progress->total = items.size(), progress->stage = 5;
+  if (progress) progress->done = 0, progress->total = items.size(),
+                progress->stage = ConvertStage::check_media;
   std::vector<MediaFailure> result(items.size());
   std::atomic<std::size_t> next{0};
   auto work = [&] {

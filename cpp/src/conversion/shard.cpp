@@ -1,7 +1,6 @@
 // Cutting one conversion into shards (docs/distributed.md): which clips and which
-// frame-table blocks shard k of K writes, and the class name of a media failure.
+// frame-table blocks shard k of K writes.
 #include <algorithm>
-#include <new>
 #include <stdexcept>
 
 #include "bsp/common/errors.hpp"
@@ -65,30 +64,6 @@ FrameTable slice_table(const FrameTable& full, std::pair<std::size_t, std::size_
   t.clip_frames.assign(full.clip_frames.begin() + static_cast<std::ptrdiff_t>(clips.first * per),
                        full.clip_frames.begin() + static_cast<std::ptrdiff_t>(clips.second * per));
   return t;
-}
-
-std::string error_kind(const std::exception_ptr& e) {
-  try {
-    std::rethrow_exception(e);
-  } catch (const CsvParseError&) {
-    return "CsvParseError";
-  } catch (const VideoDecodeError&) {
-    return "VideoDecodeError";
-  } catch (const VideoEncodeError&) {
-    return "VideoEncodeError";
-  } catch (const ApngError&) {
-    return "ApngError";
-  } catch (const Hdf5Error&) {
-    return "Hdf5Error";
-  } catch (const Error&) {
-    return "Error";
-  } catch (const std::invalid_argument&) {
-    return "ValueError";
-  } catch (const std::bad_alloc&) {
-    return "MemoryError";
-  } catch (...) {
-    return "RuntimeError";
-  }
 }
 
 }  // namespace bsp::detail

@@ -6,8 +6,6 @@
 #pragma once
 #include <fast_float/fast_float.h>
 
-#include <setjmp.h>
-
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -56,59 +54,48 @@ std::string explain_row(std::string_view row, std::size_t failed_cell,
                         const std::vector<std::string>& header,
                         const std::vector<int>& header_cols);
 
-// The file's lines: the header and the non-blank data lines (offsets exclude "\r\n").
+// data.csv, read with pread(2) into buffers rather than memory-mapped: a file truncated by
+// another process while it is read then gives a short read (FileChanged) instead of a
+// SIGBUS, so no signal handler and no jump out of C++ frames is needed; and the resident set
+// stays at the buffers' size, however large the file.
+struct FileChanged {};  // the file shrank or was modified while it was being read
+
+class InputFile {
+ public:
+  explicit InputFile(const std::string& path);  // CsvParseError if it cannot be opened
+  ~InputFile();
+  InputFile(const InputFile&) = delete;
+  InputFile& operator=(const InputFile&) = delete;
+  const std::string& path() const { return path_; }
+  std::size_t size() const { return size_; }  // when opened
+  // Reads bytes [offset, offset + n) into `out`; FileChanged when the file now ends earlier.
+  void read(std::size_t offset, std::size_t n, char* out) const;
+  // FileChanged when the file's size or modification time differs from when it was opened.
+  void check_unchanged() const;
+
+ private:
+  std::string path_;
+  int fd_ = -1;
+  std::size_t size_ = 0;
+  std::int64_t mtime_ns_ = 0;
+};
+
+// Bytes read (and scanned while in cache) at a time by each thread.
+inline constexpr std::size_t kScanBytes = std::size_t{1} << 20;
+
+// The file's lines: the header and the non-blank data lines (offsets exclude "\r\n"), and
+// the CRC-32 of the whole file, computed while the line ends were searched.
 struct Lines {
-  std::string_view header;
+  std::string header;
   std::vector<std::size_t> begin, end;
   std::vector<std::int64_t> number;  // 1-based line numbers
   bool last_unterminated = false;    // the file does not end with a line end
+  std::uint32_t crc32 = 0;
 };
-
-// Drops the mapped pages wholly inside [from, to) of the file mapping at `base` from this
-// process (MADV_DONTNEED). The file is read-only and mapped privately, so a later access
-// simply faults the page back in from the page cache: this only keeps the resident set of
-// a multi-GB data.csv from growing to the file's size. Called every kReleaseBytes behind
-// the scans.
-void release_pages(const char* base, std::size_t from, std::size_t to);
-inline constexpr std::size_t kReleaseBytes = std::size_t{16} << 20;
-
-// SIGBUS while reading the mapping means the file shrank under us (truncated by another
-// process). While a SigbusGuard exists, a SIGBUS raised inside `guarded(fn)` on the same
-// thread jumps back out of it: guarded() returns false instead of the process dying.
-// SIGBUS anywhere else goes to the handler installed before (or kills, as by default).
-class SigbusGuard {
- public:
-  SigbusGuard();
-  ~SigbusGuard();
-  SigbusGuard(const SigbusGuard&) = delete;
-  SigbusGuard& operator=(const SigbusGuard&) = delete;
-};
-sigjmp_buf*& sigbus_jump();  // this thread's target (null outside guarded())
-struct FileChanged {};       // thrown by a worker whose guarded read was cut short
-
-// Runs fn(); false if it was cut short by a SIGBUS (what fn allocated is then leaked).
-template <class Fn>
-bool guarded(Fn&& fn) {
-  sigjmp_buf here;
-  sigjmp_buf* const outer = sigbus_jump();
-  if (sigsetjmp(here, 1) != 0) {
-    sigbus_jump() = outer;
-    return false;
-  }
-  sigbus_jump() = &here;
-  try {
-    fn();
-  } catch (...) {
-    sigbus_jump() = outer;
-    throw;
-  }
-  sigbus_jump() = outer;
-  return true;
-}
 
 // Parses every data line into the columns selected by `cols` (header cell -> column index
 // or -1 to skip), in parallel; throws CsvParseError naming the first bad row.
-void parse_rows(const char* data, const Lines& lines, const std::vector<std::string>& header,
+void parse_rows(const InputFile& file, const Lines& lines, const std::vector<std::string>& header,
                 const std::vector<int>& cols, PoseTable& t, int threads,
                 std::atomic<std::uint64_t>* rows_done = nullptr);
 
@@ -124,6 +111,12 @@ inline const char* skip_spaces(const char* p, const char* end) {
 // digit), then fast_float's own Eisel-Lemire step (compute_float, to_float) rounds the
 // decimal to float32, so the result is bit-identical to fast_float::from_chars, which
 // handles everything else: exponents, nan/inf, >19 digits, the last bytes of a line.
+// Those three functions are fast_float internals (no API promise): CMakeLists.txt sets
+// BSP_FAST_FLOAT_INTERNALS only for the fast_float versions this was tested with; with any
+// other, every number goes through the documented from_chars (same values, ~20 % slower).
+#ifndef BSP_FAST_FLOAT_INTERNALS
+#define BSP_FAST_FLOAT_INTERNALS 0
+#endif
 [[gnu::noinline, gnu::cold]] inline bool parse_float_generic(const char*& p, const char* end,
                                                             float& out) {
   const auto r = fast_float::from_chars(p, end, out);
@@ -132,6 +125,7 @@ inline const char* skip_spaces(const char* p, const char* end) {
   return true;
 }
 
+#if BSP_FAST_FLOAT_INTERNALS
 inline std::uint64_t load8(const char* p) {
   std::uint64_t v;
   std::memcpy(&v, p, 8);
@@ -173,8 +167,10 @@ inline unsigned append_fraction(const char* f, unsigned int_digits, std::uint64_
   return 0;
 }
 
+#endif  // BSP_FAST_FLOAT_INTERNALS
+
 [[gnu::always_inline]] inline bool parse_float(const char*& p, const char* end, float& out) {
-#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+#if BSP_FAST_FLOAT_INTERNALS && defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
   if (end - p < 48) return parse_float_generic(p, end, out);  // loads read < 48 bytes ahead
   const char* s = p + (*p == '-');
   const std::uint64_t head = load8(s);

@@ -1,10 +1,11 @@
-// data.csv reader: mmap, line index, header, then parallel row parsing straight into the
-// preallocated columns of a PoseTable (SPEC section 1).
+// data.csv reader: pread in parallel byte ranges (line index and CRC-32 in one scan), header,
+// then parallel row parsing straight into the preallocated columns of a PoseTable (SPEC
+// section 1).
 #include <fcntl.h>
-#include <signal.h>
-#include <sys/mman.h>
+#include <libdeflate.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -20,139 +21,109 @@
 #include "csv_internal.hpp"
 
 namespace bsp {
+
+namespace csv_detail {
+
+InputFile::InputFile(const std::string& path) : path_(path) {
+  fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0) throw CsvParseError(path + ": cannot open: " + std::strerror(errno));
+  struct stat st {};
+  if (::fstat(fd_, &st) != 0) {
+    const int err = errno;
+    ::close(fd_);
+    throw CsvParseError(path + ": cannot stat: " + std::strerror(err));
+  }
+  size_ = static_cast<std::size_t>(st.st_size);
+  mtime_ns_ = std::int64_t{st.st_mtim.tv_sec} * 1000000000 + st.st_mtim.tv_nsec;
+  ::posix_fadvise(fd_, 0, 0, POSIX_FADV_SEQUENTIAL);
+}
+
+InputFile::~InputFile() { ::close(fd_); }
+
+void InputFile::read(std::size_t offset, std::size_t n, char* out) const {
+  while (n) {
+    const ssize_t got = ::pread(fd_, out, n, static_cast<off_t>(offset));
+    if (got < 0 && errno == EINTR) continue;
+    if (got < 0) throw CsvParseError(path_ + ": cannot read: " + std::strerror(errno));
+    if (got == 0) throw FileChanged();  // the file ends before the size it had when opened
+    out += got, offset += static_cast<std::size_t>(got), n -= static_cast<std::size_t>(got);
+  }
+}
+
+void InputFile::check_unchanged() const {
+  struct stat st {};
+  if (::fstat(fd_, &st) != 0 || static_cast<std::size_t>(st.st_size) != size_ ||
+      std::int64_t{st.st_mtim.tv_sec} * 1000000000 + st.st_mtim.tv_nsec != mtime_ns_)
+    throw FileChanged();
+}
+
+}  // namespace csv_detail
+
 namespace {
 using namespace csv_detail;
 
-// Read-only mapping of a whole file; the reader never copies the text.
-class MappedFile {
- public:
-  explicit MappedFile(const std::string& path) {
-    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd_ < 0) throw CsvParseError(path + ": cannot open: " + std::strerror(errno));
-    struct stat st {};
-    if (::fstat(fd_, &st) != 0) close_and_throw(path, "cannot stat");
-    size_ = static_cast<std::size_t>(st.st_size);
-    if (size_ == 0) return;
-    void* map = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd_, 0);
-    if (map == MAP_FAILED) close_and_throw(path, "cannot mmap");
-    map_ = map;
-    ::madvise(map_, size_, MADV_SEQUENTIAL);
-  }
-  ~MappedFile() {
-    if (map_) ::munmap(map_, size_);
-    if (fd_ >= 0) ::close(fd_);
-  }
-  MappedFile(const MappedFile&) = delete;
-  MappedFile& operator=(const MappedFile&) = delete;
-  const char* data() const { return static_cast<const char*>(map_); }
-  std::size_t size() const { return size_; }
-
- private:
-  // The destructor does not run when the constructor throws, so close here.
-  [[noreturn]] void close_and_throw(const std::string& path, const char* what) {
-    const int err = errno;
-    ::close(fd_);
-    fd_ = -1;
-    throw CsvParseError(path + ": " + what + ": " + std::strerror(err));
-  }
-  int fd_ = -1;
-  void* map_ = nullptr;
-  std::size_t size_ = 0;
-};
-
-}  // namespace
-
-void csv_detail::release_pages(const char* base, std::size_t from, std::size_t to) {
-  static const std::size_t page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
-  const std::size_t lo = (from + page - 1) / page * page, hi = to / page * page;
-  if (hi > lo) ::madvise(const_cast<char*>(base) + lo, hi - lo, MADV_DONTNEED);
-}
-
-namespace {
-std::mutex g_sigbus_mutex;
-int g_sigbus_users = 0;
-struct sigaction g_sigbus_previous {};
-
-void on_sigbus(int sig, siginfo_t* info, void* ctx) {
-  if (sigjmp_buf* target = csv_detail::sigbus_jump()) siglongjmp(*target, 1);
-  // Not a read of ours: hand it to whoever had SIGBUS before, or die as by default.
-  const struct sigaction& prev = g_sigbus_previous;
-  if ((prev.sa_flags & SA_SIGINFO) && prev.sa_sigaction) return prev.sa_sigaction(sig, info, ctx);
-  if (prev.sa_handler != SIG_DFL && prev.sa_handler != SIG_IGN) return prev.sa_handler(sig);
-  ::signal(SIGBUS, SIG_DFL);
-  ::raise(SIGBUS);
-}
-}  // namespace
-
-sigjmp_buf*& csv_detail::sigbus_jump() {
-  thread_local sigjmp_buf* target = nullptr;
-  return target;
-}
-
-csv_detail::SigbusGuard::SigbusGuard() {
-  std::lock_guard<std::mutex> lock(g_sigbus_mutex);
-  if (g_sigbus_users++ > 0) return;
-  struct sigaction sa {};
-  sa.sa_sigaction = on_sigbus;
-  sa.sa_flags = SA_SIGINFO | SA_NODEFER;
-  sigemptyset(&sa.sa_mask);
-  ::sigaction(SIGBUS, &sa, &g_sigbus_previous);
-}
-
-csv_detail::SigbusGuard::~SigbusGuard() {
-  std::lock_guard<std::mutex> lock(g_sigbus_mutex);
-  if (--g_sigbus_users == 0) ::sigaction(SIGBUS, &g_sigbus_previous, nullptr);
-}
-
-namespace {
-
 // Offsets of every '\n', found in parallel over byte ranges (memchr-bound), each flagged
-// when a '\r' precedes it. The flag is taken while the page is hot, so the index below
-// never touches the text again and released pages stay released.
+// when a '\r' precedes it, and the CRC-32 of the bytes: one read of the file.
 struct Newlines {
   std::vector<std::size_t> pos;
   std::vector<std::uint8_t> cr;
+  std::uint32_t crc32 = 0;
+  char last = 0;  // the file's last byte
 };
 
-[[noreturn]] void throw_file_changed() {
-  throw csv_detail::FileChanged();
-}
-
-Newlines find_newlines(const char* data, std::size_t size, int threads) {
+Newlines find_newlines(const InputFile& file, int threads) {
+  const std::size_t size = file.size();
   std::mutex mutex;
-  std::vector<std::pair<std::size_t, Newlines>> parts;
+  struct Part {
+    std::size_t lo, hi;
+    Newlines found;
+  };
+  std::vector<Part> parts;
   parallel_for(size, std::size_t{1} << 22, [&](std::size_t lo, std::size_t hi) {
     Newlines found;
-    const bool whole = csv_detail::guarded([&] {
-      for (std::size_t a = lo; a < hi; a += kReleaseBytes) {
-        const std::size_t b = std::min(hi, a + kReleaseBytes);
-        for (const char* p = data + a; p < data + b; ++p) {
-          p = static_cast<const char*>(std::memchr(p, '\n', static_cast<std::size_t>(data + b - p)));
-          if (!p) break;
-          found.pos.push_back(static_cast<std::size_t>(p - data));
-          found.cr.push_back(p > data && p[-1] == '\r');
-        }
-        release_pages(data, a, b);
+    std::unique_ptr<char[]> buf(new char[kScanBytes]);
+    char before = 0;  // the byte before buf[0]
+    if (lo > 0) file.read(lo - 1, 1, &before);
+    std::uint32_t crc = 0;
+    for (std::size_t a = lo; a < hi; a += kScanBytes) {
+      const std::size_t n = std::min(hi, a + kScanBytes) - a;
+      file.read(a, n, buf.get());
+      crc = libdeflate_crc32(crc, buf.get(), n);
+      const char* const data = buf.get();
+      for (const char* p = data; p < data + n; ++p) {
+        p = static_cast<const char*>(std::memchr(p, '\n', static_cast<std::size_t>(data + n - p)));
+        if (!p) break;
+        found.pos.push_back(a + static_cast<std::size_t>(p - data));
+        found.cr.push_back((p > data ? p[-1] : before) == '\r');
       }
-    });
-    if (!whole) throw_file_changed();
+      before = data[n - 1];
+    }
+    found.crc32 = crc;
+    found.last = before;
     std::lock_guard<std::mutex> lock(mutex);
-    parts.emplace_back(lo, std::move(found));
+    parts.push_back({lo, hi, std::move(found)});
   }, threads);
-  std::sort(parts.begin(), parts.end(),
-            [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::sort(parts.begin(), parts.end(), [](const Part& a, const Part& b) { return a.lo < b.lo; });
   Newlines all;
-  for (auto& part : parts) {
-    all.pos.insert(all.pos.end(), part.second.pos.begin(), part.second.pos.end());
-    all.cr.insert(all.cr.end(), part.second.cr.begin(), part.second.cr.end());
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    const Part& part = parts[k];
+    all.pos.insert(all.pos.end(), part.found.pos.begin(), part.found.pos.end());
+    all.cr.insert(all.cr.end(), part.found.cr.begin(), part.found.cr.end());
+    // zlib joins the ranges' CRCs (libdeflate computes the same CRC-32, faster).
+    all.crc32 = k == 0 ? part.found.crc32
+                       : static_cast<std::uint32_t>(crc32_combine(
+                             all.crc32, part.found.crc32, static_cast<z_off_t>(part.hi - part.lo)));
+    all.last = part.found.last;
   }
   return all;
 }
 
 // Splits the file into the header and the non-blank data lines ('\r\n' or '\n').
-Lines index_lines(const char* data, std::size_t size, int threads) {
-  const Newlines nl = find_newlines(data, size, threads);
+Lines index_lines(const InputFile& file, int threads) {
+  const std::size_t size = file.size();
+  const Newlines nl = find_newlines(file, threads);
   Lines lines;
+  lines.crc32 = nl.crc32;
   lines.last_unterminated = nl.pos.empty() || nl.pos.back() + 1 != size;
   const std::size_t count = nl.pos.size() + (lines.last_unterminated ? 1 : 0);
   lines.begin.reserve(count);
@@ -162,10 +133,11 @@ Lines index_lines(const char* data, std::size_t size, int threads) {
   for (std::size_t k = 0; k < count; ++k) {
     std::size_t stop = k < nl.pos.size() ? nl.pos[k] : size;
     const std::size_t next = stop + 1;
-    const bool cr = k < nl.pos.size() ? nl.cr[k] != 0 : (stop > start && data[stop - 1] == '\r');
+    const bool cr = k < nl.pos.size() ? nl.cr[k] != 0 : (stop > start && nl.last == '\r');
     if (cr && stop > start) --stop;
     if (k == 0) {
-      lines.header = std::string_view(data + start, stop - start);
+      lines.header.resize(stop - start);
+      file.read(start, stop - start, lines.header.data());
     } else if (stop > start) {  // blank lines are skipped, as pandas does
       lines.begin.push_back(start);
       lines.end.push_back(stop);
@@ -286,37 +258,37 @@ void check_duplicates(const PoseTable& t) {
       std::to_string(t.line[order[first]]) + " and line " + std::to_string(t.line[r]));
 }
 
-void parse_file(const char* data, std::size_t size, const std::string& path,
-                const CsvReadOptions& opt, const std::vector<bool>& wanted, int threads,
-                PoseTable& t);
+void parse_file(const InputFile& file, const CsvReadOptions& opt,
+                const std::vector<bool>& wanted, int threads, PoseTable& t);
 
 }  // namespace
 
 PoseTable read_pose_csv(const std::string& path, const CsvReadOptions& opt) {
   const std::vector<bool> wanted = wanted_columns(opt);
   const int threads = opt.threads > 0 ? opt.threads : num_threads();
-  MappedFile file(path);
+  const InputFile file(path);
   if (file.size() == 0) throw CsvParseError(path + ", line 1 (header): empty file, no header");
-  // Another process may truncate the file while it is mapped: every read of the mapping is
-  // guarded, and a SIGBUS becomes this error instead of killing the process.
-  csv_detail::SigbusGuard sigbus;
   PoseTable t;
   try {
-    if (csv_detail::guarded([&] { parse_file(file.data(), file.size(), path, opt, wanted,
-                                             threads, t); }))
-      return t;
-  } catch (const csv_detail::FileChanged&) {
+    // Another process may truncate or rewrite the file while it is read: a read past its
+    // new end, or a size or modification time that changed by the end, is this error.
+    parse_file(file, opt, wanted, threads, t);
+    file.check_unchanged();
+    return t;
+  } catch (const FileChanged&) {
   }
   throw CsvParseError(path + ": the file changed while it was being read (truncated by "
                       "another process?); nothing was parsed");
 }
 
 namespace {
-void parse_file(const char* data, std::size_t size, const std::string& path,
-                const CsvReadOptions& opt, const std::vector<bool>& wanted, int threads,
-                PoseTable& t) {
+void parse_file(const InputFile& file, const CsvReadOptions& opt,
+                const std::vector<bool>& wanted, int threads, PoseTable& t) {
+  const std::string& path = file.path();
   t.path = path;
-  const csv_detail::Lines lines = index_lines(data, size, threads);
+  const csv_detail::Lines lines = index_lines(file, threads);
+  t.file_bytes = file.size();
+  t.file_crc32 = lines.crc32;
   // A '\r' left inside the first line means CR-only line ends (classic Mac): the whole
   // file would read as a header and no rows. Refused rather than converted to nothing.
   if (const std::size_t cr = lines.header.find('\r'); cr != std::string_view::npos)
@@ -328,7 +300,7 @@ void parse_file(const char* data, std::size_t size, const std::string& path,
   t.rows = lines.begin.size();
   t.line = lines.number;
   if (opt.rows_total) *opt.rows_total = t.rows;
-  csv_detail::parse_rows(data, lines, names, cols, t, threads, opt.rows_done);
+  csv_detail::parse_rows(file, lines, names, cols, t, threads, opt.rows_done);
   if (opt.check_duplicates) check_duplicates(t);
 }
 }  // namespace

@@ -1,7 +1,7 @@
-// The reader's hot loop: blocks of rows parsed in parallel, each thread writing straight
-// into the preallocated columns. Strings are dictionary-encoded per block and the block
-// dictionaries merged in file order afterwards, so codes (first-seen order) and every other
-// value are identical for any thread count.
+// The reader's hot loop: blocks of rows parsed in parallel, each thread reading its rows a
+// buffer at a time and writing straight into the preallocated columns. Strings are
+// dictionary-encoded per block and the block dictionaries merged in file order afterwards,
+// so codes (first-seen order) and every other value are identical for any thread count.
 #include <deque>
 #include <memory>
 #include <mutex>
@@ -31,16 +31,21 @@ struct Target {
   std::int64_t lo = 0, hi = 0;  // integer columns: the accepted range
 };
 
-// First-seen dictionary of one string column within one block of rows. Keys view the
-// mapped file (or `owned_` for unescaped values), which outlive the merge.
+// First-seen dictionary of one string column within one block of rows. It owns its values
+// (`owned_`: the read buffer is reused), which outlive the merge.
 class LocalDict {
  public:
   std::int32_t code(std::string_view raw, bool escaped) {
     if (last_code_ >= 0 && !escaped && raw == last_) return last_code_;  // runs of one clip
-    if (escaped) raw = owned_.emplace_back(unescape_quotes(raw));
-    const auto [it, inserted] = index_.emplace(raw, static_cast<std::int32_t>(values_.size()));
-    if (inserted) values_.push_back(raw);
-    last_ = raw;
+    std::string unescaped;
+    if (escaped) raw = unescaped = unescape_quotes(raw);
+    auto it = index_.find(raw);
+    if (it == index_.end()) {
+      const std::string_view value = owned_.emplace_back(raw);
+      it = index_.emplace(value, static_cast<std::int32_t>(values_.size())).first;
+      values_.push_back(value);
+    }
+    last_ = it->first;
     last_code_ = it->second;
     return last_code_;
   }
@@ -60,6 +65,7 @@ struct Block {
   std::size_t lo = 0, hi = 0;
   std::vector<LocalDict> dicts;
   std::size_t failed_row = kNoRow, failed_cell = 0;
+  std::string failed_text;  // the bad row, for the error message
 };
 
 inline bool parse_cell(const Target& t, std::size_t row, const char*& p, const char* end,
@@ -80,28 +86,36 @@ inline bool parse_cell(const Target& t, std::size_t row, const char*& p, const c
   return false;
 }
 
-// Parses rows [b.lo, b.hi); stops at the first bad row and records where.
-void parse_block(const char* data, const Lines& lines, const std::vector<Target>& targets,
+// Parses rows [b.lo, b.hi), reading them from the file about kScanBytes at a time (at least
+// one whole row); stops at the first bad row and records where.
+void parse_block(const InputFile& file, const Lines& lines, const std::vector<Target>& targets,
                  Block& b, std::atomic<std::uint64_t>* rows_done) {
   const std::size_t n = targets.size();
-  std::size_t released = lines.begin[b.lo];
-  for (std::size_t row = b.lo; row < b.hi; ++row) {
-    if (lines.begin[row] - released >= kReleaseBytes) {
-      release_pages(data, released, lines.begin[row]);
-      released = lines.begin[row];
-    }
-    if (rows_done && (row - b.lo) % 256 == 255) *rows_done += 256;
-    const char* p = data + lines.begin[row];
-    const char* end = data + lines.end[row];
-    for (std::size_t c = 0; c < n; ++c) {
-      const bool ok = parse_cell(targets[c], row, p, end, b) &&
-                      (c + 1 < n ? (p < end && *p++ == ',') : p == end);
-      if (!ok) {
-        b.failed_row = row;
-        b.failed_cell = c;
-        return;
+  std::vector<char> buf;
+  for (std::size_t first = b.lo; first < b.hi;) {
+    const std::size_t from = lines.begin[first];
+    std::size_t last = first + 1;  // rows [first, last) fit the buffer
+    while (last < b.hi && lines.end[last] - from <= kScanBytes) ++last;
+    const std::size_t bytes = lines.end[last - 1] - from;
+    if (buf.size() < bytes) buf.resize(std::max(bytes, kScanBytes));
+    file.read(from, bytes, buf.data());
+    for (std::size_t row = first; row < last; ++row) {
+      if (rows_done && (row - b.lo) % 256 == 255) *rows_done += 256;
+      const char* const line = buf.data() + (lines.begin[row] - from);
+      const char* p = line;
+      const char* end = buf.data() + (lines.end[row] - from);
+      for (std::size_t c = 0; c < n; ++c) {
+        const bool ok = parse_cell(targets[c], row, p, end, b) &&
+                        (c + 1 < n ? (p < end && *p++ == ',') : p == end);
+        if (!ok) {
+          b.failed_row = row;
+          b.failed_cell = c;
+          b.failed_text.assign(line, end);
+          return;
+        }
       }
     }
+    first = last;
   }
   if (rows_done) *rows_done += (b.hi - b.lo) % 256;  // the rows not yet counted above
 }
@@ -163,7 +177,7 @@ void merge_strings(const std::vector<std::unique_ptr<Block>>& blocks,
 
 }  // namespace
 
-void parse_rows(const char* data, const Lines& lines, const std::vector<std::string>& header,
+void parse_rows(const InputFile& file, const Lines& lines, const std::vector<std::string>& header,
                 const std::vector<int>& cols, PoseTable& t, int threads,
                 std::atomic<std::uint64_t>* rows_done) {
   int dicts = 0;
@@ -174,7 +188,7 @@ void parse_rows(const char* data, const Lines& lines, const std::vector<std::str
     auto b = std::make_unique<Block>();
     b->lo = lo, b->hi = hi;
     b->dicts.resize(static_cast<std::size_t>(dicts));
-    if (!guarded([&] { parse_block(data, lines, targets, *b, rows_done); })) throw FileChanged();
+    parse_block(file, lines, targets, *b, rows_done);
     std::lock_guard<std::mutex> lock(mutex);
     blocks.push_back(std::move(b));
   }, threads);
@@ -182,9 +196,8 @@ void parse_rows(const char* data, const Lines& lines, const std::vector<std::str
   for (const auto& b : blocks) {
     if (b->failed_row == kNoRow) continue;
     const std::size_t r = b->failed_row;
-    const std::string_view row(data + lines.begin[r], lines.end[r] - lines.begin[r]);
     std::string msg = t.path + ", line " + std::to_string(lines.number[r]) + ", " +
-                      explain_row(row, b->failed_cell, header, cols);
+                      explain_row(b->failed_text, b->failed_cell, header, cols);
     if (r + 1 == lines.begin.size() && lines.last_unterminated)
       msg += " (the last line has no line end: is the file truncated?)";
     throw CsvParseError(msg);

@@ -4,7 +4,6 @@
 #include <fcntl.h>
 #include <unistd.h>
 
-#include <atomic>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -14,6 +13,7 @@
 
 #include "bsp/common/errors.hpp"
 #include "bsp/common/parallel.hpp"
+#include "common/atomic_file.hpp"
 #include "csv_internal.hpp"
 
 namespace bsp {
@@ -178,28 +178,25 @@ char* format_row(const RowFormat& f, std::size_t row, char* o) {
   return o;
 }
 
-// A file written under a temporary name and renamed over `path` on commit(); removed if
-// anything fails before that.
-class AtomicFile {
+// The output file: written under AtomicFile's temporary name, renamed over `path` on
+// commit(); removed if anything fails before that.
+class OutputFile {
  public:
-  explicit AtomicFile(const std::string& path) : path_(path) {
-    static std::atomic<unsigned> counter{0};
-    tmp_ = path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(counter++);
-    fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-    if (fd_ < 0) fail("cannot create " + tmp_);
+  explicit OutputFile(const std::string& path) : path_(path), out_(path) {
+    fd_ = ::open(tmp().c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    if (fd_ < 0) fail("cannot create " + tmp());
   }
-  ~AtomicFile() {
+  ~OutputFile() {
     if (fd_ >= 0) ::close(fd_);
-    if (!committed_) ::unlink(tmp_.c_str());
   }
-  AtomicFile(const AtomicFile&) = delete;
-  AtomicFile& operator=(const AtomicFile&) = delete;
+  OutputFile(const OutputFile&) = delete;
+  OutputFile& operator=(const OutputFile&) = delete;
 
   void write(const char* p, std::size_t n) {
     while (n) {
       const ssize_t w = ::write(fd_, p, n);
       if (w < 0 && errno == EINTR) continue;
-      if (w < 0) fail("cannot write " + tmp_);
+      if (w < 0) fail("cannot write " + tmp());
       p += w;
       n -= static_cast<std::size_t>(w);
     }
@@ -207,18 +204,21 @@ class AtomicFile {
   void commit() {
     const int fd = fd_;
     fd_ = -1;
-    if (::close(fd) != 0) fail("cannot close " + tmp_);
-    if (::rename(tmp_.c_str(), path_.c_str()) != 0) fail("cannot rename " + tmp_);
-    committed_ = true;
+    if (::close(fd) != 0) fail("cannot close " + tmp());
+    if (const int err = out_.commit()) {
+      errno = err;
+      fail("cannot rename " + tmp());
+    }
   }
 
  private:
+  const std::string& tmp() const { return out_.path(); }
   [[noreturn]] void fail(const std::string& what) {
     throw Error(path_ + ": " + what + ": " + std::strerror(errno));
   }
-  std::string path_, tmp_;
+  std::string path_;
+  AtomicFile out_;
   int fd_ = -1;
-  bool committed_ = false;
 };
 
 }  // namespace
@@ -229,7 +229,7 @@ void write_pose_csv(const std::string& path, const PoseTable& table, int threads
   validate(t);
   const RowFormat format(t);
   if (threads <= 0) threads = num_threads();
-  AtomicFile file(path);
+  OutputFile file(path);
   std::string header;
   for (const char* name : kPoseCsvColumns) header += std::string(header.empty() ? "" : ",") + name;
   header += '\n';

@@ -1,4 +1,4 @@
-#include "bsp/hdf5/h5.hpp"
+#include "hdf5/h5.hpp"
 
 #include <algorithm>
 #include <mutex>
@@ -202,6 +202,12 @@ void File::close() {
   if (h_.id() < 0) return;
   check_status(H5Fflush(h_.id(), H5F_SCOPE_GLOBAL), "cannot flush " + path_);
   h_.reset();
+}
+
+std::string library_version() {
+  unsigned major = 0, minor = 0, release = 0;
+  H5get_libversion(&major, &minor, &release);
+  return std::to_string(major) + "." + std::to_string(minor) + "." + std::to_string(release);
 }
 
 }  // namespace bsp::h5

@@ -1,9 +1,7 @@
 // ApngWriter: palette-indexed APNG with changed-rectangle frames, written as it goes.
 #include <libdeflate.h>
-#include <unistd.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -13,6 +11,7 @@
 
 #include "bsp/common/errors.hpp"
 #include "bsp/media/apng.hpp"
+#include "common/atomic_file.hpp"
 #include "png.hpp"
 
 namespace bsp {
@@ -43,11 +42,6 @@ struct FileCloser {
   void operator()(std::FILE* f) const noexcept { std::fclose(f); }
 };
 using File = std::unique_ptr<std::FILE, FileCloser>;
-
-std::string temp_name(const std::string& path) {
-  static std::atomic<unsigned> counter{0};
-  return path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(counter++);
-}
 
 // Best p/q ~= x with q <= max_q (continued fractions); the frame period 1/fps as a PNG delay.
 std::pair<std::uint32_t, std::uint32_t> rational(double x, std::uint32_t max_q) {
@@ -99,7 +93,8 @@ bool changed_rect(const std::uint8_t* a, const std::uint8_t* b, std::size_t widt
 }  // namespace
 
 struct ApngWriter::Impl {
-  std::string path, tmp;
+  std::string path;
+  AtomicFile out;  // the temporary file, deleted unless close() renamed it into place
   int width = 0, height = 0;
   bool drop_duplicates = false;
   std::uint32_t delay_num = 1, delay_den = 30;  // one frame period
@@ -113,11 +108,7 @@ struct ApngWriter::Impl {
   long actl_offset = 0;
   bool closed = false;
 
-  ~Impl() {
-    if (closed) return;
-    file.reset();
-    if (!tmp.empty()) std::remove(tmp.c_str());
-  }
+  ~Impl() { file.reset(); }  // closed before `out` deletes an unfinished file
   [[noreturn]] void fail(const std::string& what) const { throw ApngError(path + ": " + what); }
   void put(const void* data, std::size_t n);
   void chunk(const char* type, const std::uint8_t* head, std::size_t nh,
@@ -131,7 +122,7 @@ struct ApngWriter::Impl {
 
 void ApngWriter::Impl::put(const void* data, std::size_t n) {
   if (n && std::fwrite(data, 1, n, file.get()) != n)
-    fail("write to " + tmp + " failed: " + std::strerror(errno));
+    fail("write to " + out.path() + " failed: " + std::strerror(errno));
 }
 
 void ApngWriter::Impl::chunk(const char* type, const std::uint8_t* head, std::size_t nh,
@@ -246,9 +237,9 @@ ApngWriter::ApngWriter(std::string path, int width, int height,
   if (m.delay_num == 0) m.fail("fps " + std::to_string(fps) + " is too high for a PNG delay");
   m.compressor = png::make_compressor(level);
   if (!m.compressor) m.fail("libdeflate level must be 1..12, got " + std::to_string(level));
-  m.tmp = temp_name(m.path);
-  m.file.reset(std::fopen(m.tmp.c_str(), "wb"));
-  if (!m.file) m.fail("cannot create " + m.tmp + ": " + std::strerror(errno));
+  m.out = AtomicFile(m.path);
+  m.file.reset(std::fopen(m.out.path().c_str(), "wb"));
+  if (!m.file) m.fail("cannot create " + m.out.path() + ": " + std::strerror(errno));
   m.canvas.assign(static_cast<std::size_t>(width) * height, 0);
   m.write_header(palette);
 }
@@ -287,12 +278,12 @@ void ApngWriter::close() {
   std::uint8_t actl[8] = {0};
   png::put_u32(actl, static_cast<std::uint32_t>(m.frames_out));
   if (std::fseek(m.file.get(), m.actl_offset, SEEK_SET) != 0)
-    m.fail("cannot seek in " + m.tmp + ": " + std::strerror(errno));
+    m.fail("cannot seek in " + m.out.path() + ": " + std::strerror(errno));
   m.chunk("acTL", actl, sizeof actl);
   if (std::fclose(m.file.release()) != 0)
-    m.fail("cannot finish " + m.tmp + ": " + std::strerror(errno));
-  if (std::rename(m.tmp.c_str(), m.path.c_str()) != 0)
-    m.fail("cannot rename " + m.tmp + " into place: " + std::strerror(errno));
+    m.fail("cannot finish " + m.out.path() + ": " + std::strerror(errno));
+  if (const int err = m.out.commit())
+    m.fail("cannot rename " + m.out.path() + " into place: " + std::strerror(err));
   m.closed = true;
 }
 

@@ -1,12 +1,9 @@
 // VideoWriter: RGB frames -> swscale -> libx264 -> MP4 muxer, through a temporary file.
-#include <unistd.h>
-
-#include <atomic>
 #include <cmath>
-#include <cstdio>
 
 #include "bsp/common/errors.hpp"
 #include "bsp/media/video.hpp"
+#include "common/atomic_file.hpp"
 #include "ffmpeg.hpp"
 
 extern "C" {
@@ -15,11 +12,6 @@ extern "C" {
 
 namespace bsp {
 namespace {
-
-std::string temp_name(const std::string& path) {
-  static std::atomic<unsigned> counter{0};
-  return path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(counter++);
-}
 
 // Muxer by the final name's extension ("clip.mp4" -> mp4), MP4 when it has none we know.
 const AVOutputFormat* guess_format(const std::string& path) {
@@ -30,7 +22,8 @@ const AVOutputFormat* guess_format(const std::string& path) {
 }  // namespace
 
 struct VideoWriter::Impl {
-  std::string path, tmp;
+  std::string path;
+  AtomicFile out;  // the temporary file, deleted unless close() renamed it into place
   int width = 0, height = 0;
   av::OutputFormat fmt;
   av::CodecContext enc;
@@ -41,12 +34,10 @@ struct VideoWriter::Impl {
   std::int64_t frames = 0;
   bool closed = false;
 
-  // An unfinished file never survives its writer: close the handle, then delete it.
+  // An unfinished file never survives its writer: close the handle, then `out` deletes it.
   ~Impl() {
-    if (closed) return;
     enc.reset();
     fmt.reset();
-    if (!tmp.empty()) std::remove(tmp.c_str());
   }
   [[noreturn]] void fail(const std::string& what) const { throw VideoEncodeError(path + ": " + what); }
   void open_encoder(double fps, std::int64_t bitrate, const std::string& preset, int threads);
@@ -91,8 +82,8 @@ void VideoWriter::Impl::open_muxer() {
   stream->time_base = enc->time_base;
   stream->avg_frame_rate = enc->framerate;
   if (!(fmt->oformat->flags & AVFMT_NOFILE))
-    BSP_AV_CHECK(VideoEncodeError, avio_open(&fmt->pb, tmp.c_str(), AVIO_FLAG_WRITE), path,
-                 "create " + tmp);
+    BSP_AV_CHECK(VideoEncodeError, avio_open(&fmt->pb, out.path().c_str(), AVIO_FLAG_WRITE),
+                 path, "create " + out.path());
   BSP_AV_CHECK(VideoEncodeError, avformat_write_header(fmt.get(), nullptr), path,
                "write the container header");
 }
@@ -124,10 +115,11 @@ VideoWriter::VideoWriter(std::string path, int width, int height, double fps,
   if (bitrate <= 0) m.fail("bitrate must be positive, got " + std::to_string(bitrate));
   if (threads < 0) m.fail("threads must be >= 0 (0 = let x264 choose)");
   av::quiet_logs();
-  m.tmp = temp_name(m.path);
+  m.out = AtomicFile(m.path);
   AVFormatContext* raw = nullptr;
   BSP_AV_CHECK(VideoEncodeError,
-               avformat_alloc_output_context2(&raw, guess_format(m.path), nullptr, m.tmp.c_str()),
+               avformat_alloc_output_context2(&raw, guess_format(m.path), nullptr,
+                                              m.out.path().c_str()),
                m.path, "create the output context");
   m.fmt.reset(raw);
   m.fmt->flags |= AVFMT_FLAG_BITEXACT;  // no library versions or creation times in the file
@@ -168,8 +160,7 @@ void VideoWriter::close() {
   m.drain(true);
   BSP_AV_CHECK(VideoEncodeError, av_write_trailer(m.fmt.get()), m.path, "write the trailer");
   m.fmt.reset();  // closes the file
-  if (std::rename(m.tmp.c_str(), m.path.c_str()) != 0)
-    m.fail("cannot rename " + m.tmp + " into place");
+  if (m.out.commit() != 0) m.fail("cannot rename " + m.out.path() + " into place");
   m.closed = true;
 }
 

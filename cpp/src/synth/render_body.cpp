@@ -116,6 +116,8 @@ void render_bodies(const Camera& cam, const Lighting& light, const std::uint8_t*
                    const std::uint8_t* bg_tags, const float* bg_depth, const Capsule* caps,
                    std::size_t caps_per_frame, std::size_t frames, std::uint8_t* rgb,
                    std::uint8_t* tags, std::uint8_t* visible, int threads) {
+  check_camera(cam);
+  check_lighting(light);
   const std::size_t npx = static_cast<std::size_t>(cam.width()) * cam.height();
   // Frames are independent: one block of frames per thread.
   parallel_for(frames, 1, [&](std::size_t lo, std::size_t hi) {

@@ -2,11 +2,32 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <stdexcept>
+#include <string>
 
 #include "bsp/synth/render.hpp"
 #include "render_internal.hpp"
 
 namespace bsp::render {
+
+void check_camera(const Camera& cam) {
+  if (!(cam.k.width > 0 && cam.k.height > 0 && cam.k.fov_deg > 0 && cam.k.fov_deg < 180))
+    throw std::invalid_argument("camera: need width > 0, height > 0 and 0 < fov < 180");
+}
+
+void check_lighting(const Lighting& light) {
+  if (!(light.fog_distance > 0)) throw std::invalid_argument("light: fog distance must be > 0");
+  if (!(light.sun.norm() > 0)) throw std::invalid_argument("light: sun direction must be non-zero");
+}
+
+void check_scene(const Scene& scene) {
+  check_lighting(scene.light);
+  for (std::size_t i = 0; i < scene.boxes.size(); ++i) {
+    const int pattern = static_cast<int>(scene.boxes[i].pattern);
+    if (pattern < 0 || pattern > 3)
+      throw std::invalid_argument("boxes row " + std::to_string(i) + ": pattern must be 0..3");
+  }
+}
 
 Vec3 pixel_direction(const Camera& cam, int i, int j) {
   const double f = cam.k.focal();

@@ -152,6 +152,8 @@ Scene cull_behind(const Scene& sc, const Vec3& origin, const Vec3& fwd) {
 
 void render_background(const Scene& full, const Camera& cam, std::uint8_t* rgb,
                        std::uint8_t* tags, float* depth, int threads) {
+  check_scene(full);
+  check_camera(cam);
   const int W = cam.width(), H = cam.height();
   const Mat3 road_rt = full.road.R.transpose();
   const Vec3 origin = road_rt * (cam.pose.t - full.road.t);

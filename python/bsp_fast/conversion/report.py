@@ -5,17 +5,22 @@ from __future__ import annotations
 import math
 import sys
 
+from .._native import core as _core
+
 __all__ = ["ProgressBars", "problems", "format_report", "verify_table"]
 
-_STAGES = ("reading data.csv", "planning clips", "verifying poses", "writing clips", "done",
-           "checking media files", "cropping media frames")
-_UNITS = {0: "row", 3: "clip", 5: "recording", 6: "frame"}
+_Stage = _core.ConvertStage
+# The stages that get a bar: its label and what done/total count.
+_BARS = {_Stage.read: ("reading data.csv", "row"), _Stage.write: ("writing clips", "clip"),
+         _Stage.check_media: ("checking media files", "recording"),
+         _Stage.media: ("cropping media frames", "frame")}
 
 
 class ProgressBars:
     """One tqdm bar per stage of the C++ conversion, fed by polling its counters.
 
-    ``poll(stage, total, done)`` takes one consistent snapshot. A bar starts at the count
+    ``poll(stage, total, done)`` takes one consistent snapshot (``stage``: a
+    ``_core.ConvertStage``, or its integer value). A bar starts at the count
     its stage had already reached when first seen (so the rate only counts what it watched
     happen), advances with ``update`` (so tqdm's rate is items per second of wall time), and
     is filled to its total when its stage ends: a finished stage never shows less than
@@ -26,19 +31,20 @@ class ProgressBars:
         self.enabled, self.file = bool(enabled), file
         self.stage, self.bar = None, None
 
-    def poll(self, stage: int, total: int, done: int) -> None:
+    def poll(self, stage, total: int, done: int) -> None:
         if not self.enabled:
             return
+        stage = _Stage(int(stage))
         if stage != self.stage:
             self._finish()
             self.stage = stage
-            if stage in _UNITS:
+            if stage in _BARS:
                 from tqdm import tqdm
 
+                desc, unit = _BARS[stage]
                 self.bar = tqdm(total=total, initial=min(done, total) if total else done,
-                                desc=_STAGES[stage], unit=_UNITS[stage],
-                                unit_scale=stage == 0, file=self.file or sys.stderr,
-                                dynamic_ncols=True)
+                                desc=desc, unit=unit, unit_scale=stage == _Stage.read,
+                                file=self.file or sys.stderr, dynamic_ncols=True)
             return
         if self.bar is not None:
             if total and total != self.bar.total:

@@ -14,7 +14,6 @@ converter does. See docs/distributed.md.
 """
 from __future__ import annotations
 
-import builtins
 import math
 import os
 import time
@@ -65,8 +64,9 @@ def _convert_shard(csv: str, folder: str, k: int, count: int, options: dict,
 
 
 def _raise_failure(f: dict):
-    cls = getattr(_core, f["kind"], None) or getattr(builtins, f["kind"], RuntimeError)
-    raise cls(f["reason"])
+    """Raises the shard's failure as the one-process converter raises it: the same type
+    (``f["kind"]``, a ``_core.ErrorKind``, mapped back to its class by the core) and message."""
+    _core.raise_error(f["kind"], f["reason"])
 
 
 def _run_shards(client, csv, folder, count, options, exclude):
@@ -107,7 +107,7 @@ def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
         while True:
             reports = _run_shards(client, csv, tmp_dir.absolute(), shards, options, exclude)
             failures = sorted((f for r in reports for f in r["shard_failures"]),
-                              key=lambda f: (f["phase"], f["order"]))
+                              key=lambda f: (int(f["phase"]), f["order"]))
             for f in failures:
                 f["path"], f["reason"] = relabel(f["path"]), relabel(f["reason"])
             if not failures:
@@ -116,7 +116,8 @@ def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
                 _raise_failure(failures[0])
             for f in failures:  # plan again without them, as the one-process converter does
                 exclude.append((*f["recording"], f["path"], f["reason"]))
-            passes += any(f["phase"] == 1 for f in failures)  # found only while decoding
+            # found only while decoding: the one-process converter had written the file
+            passes += any(f["phase"] == _core.FailurePhase.decode for f in failures)
             for p in tmp_dir.iterdir():
                 p.unlink()
         report = _merge(reports, passes, shards, time.perf_counter() - t0)

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "bsp/clips/clips.hpp"
+#include "bsp/common/errors.hpp"
 
 namespace bsp {
 
@@ -58,11 +59,17 @@ struct ConvertOptions {
   std::map<std::string, std::string> extra_attrs;  // e.g. the Python-side settings JSON
 };
 
+// What a conversion is doing (registered with pybind11 as _core.ConvertStage). In time:
+// read, plan, check_media (with media), verify (with verify), write, media (with media),
+// done. ConvertProgress's done/total count rows in `read`, media files in `check_media`,
+// frames in `media`, clips otherwise.
+enum class ConvertStage : int {
+  read = 0, plan = 1, verify = 2, write = 3, done = 4, check_media = 5, media = 6
+};
+
 // Polled by the Python side from another thread (no callbacks into Python).
 struct ConvertProgress {
-  // 0 read, 1 plan, 2 verify, 3 write clips, 4 done, 5 check media files, 6 media frames
-  // (done/total count rows in stage 0, media files in 5, frames in 6, clips otherwise).
-  std::atomic<int> stage{0};
+  std::atomic<ConvertStage> stage{ConvertStage::read};
   std::atomic<std::uint64_t> done{0}, total{0};
   // Set from another thread to stop the conversion: every stage checks it between units of
   // work (rows of clips, media files, recordings), joins its worker threads and throws
@@ -91,14 +98,17 @@ struct MediaReport {
   int passes = 0;  // times the file was written: > 1 when a file failed mid-decode (skipped)
 };
 
-// A media failure of a shard: phase 0 = found while opening the files (order: plan
-// recording index), 1 = while decoding (order: split << 32 | table block), which is the
-// order in which the unsharded converter meets them. `kind` is the exception's class name.
+// When a shard met a media failure (registered with pybind11 as _core.FailurePhase):
+// while opening the files (order: plan recording index) or while decoding (order: split
+// << 32 | table block). Sorted by (phase, order), failures come in the order in which the
+// unsharded converter meets them.
+enum class FailurePhase : int { open = 0, decode = 1 };
+
 struct ShardFailure {
-  int phase = 0;
+  FailurePhase phase = FailurePhase::open;
   std::uint64_t order = 0;
   LeftOutRecording recording;
-  std::string kind;
+  ErrorKind kind = ErrorKind::Error;  // the exception's type
 };
 
 struct ConvertReport {

@@ -1,10 +1,10 @@
 // The CARLA-BSP data.csv reader and writer (SPEC section 1).
 //
 // The file is read into a columnar PoseTable: one member per CSV column, numbers in flat
-// row-major arrays, strings dictionary-encoded. Reading memory-maps the file, finds the
-// row boundaries (quoted cells hold commas but never newlines) and parses row blocks in
-// parallel straight into the preallocated columns; the result is identical for any thread
-// count. Writing reproduces pandas `DataFrame.to_csv(index=False)` byte for byte.
+// row-major arrays, strings dictionary-encoded. Reading scans the file once in parallel for
+// the row boundaries (quoted cells hold commas but never newlines) and its CRC-32, then
+// parses row blocks in parallel straight into the preallocated columns, each thread
+// reading its rows a buffer at a time; the result is identical for any thread count. Writing reproduces pandas `DataFrame.to_csv(index=False)` byte for byte.
 #pragma once
 #include <array>
 #include <atomic>
@@ -25,6 +25,8 @@ struct StringColumn {
 struct PoseTable {
   std::string path;
   std::size_t rows = 0;
+  std::uint64_t file_bytes = 0;  // the size of the file read
+  std::uint32_t file_crc32 = 0;  // CRC-32 (zlib's) of all its bytes, computed while reading
   std::vector<std::int64_t> line;  // 1-based line of each row in the file (header = line 1)
 
   StringColumn id, map, model, age, gender, recording, segmentation;

@@ -86,6 +86,14 @@ struct Camera {
   int height() const { return static_cast<int>(k.height); }
 };
 
+// Option checks (std::invalid_argument with the message bsp_fast shows); render_background
+// and render_bodies run them first. A camera needs a positive image size and 0 < fov < 180;
+// lighting a fog distance > 0 and a non-zero sun direction; a scene valid lighting and box
+// patterns in 0..3 (boxes are named by row).
+void check_camera(const Camera& cam);
+void check_lighting(const Lighting& light);
+void check_scene(const Scene& scene);
+
 // Unnormalised ray direction through pixel centre (j + 0.5, i + 0.5), in camera axes:
 // (1, y, z), so a hit at ray parameter t has camera-x depth t.
 Vec3 pixel_direction(const Camera& cam, int i, int j);

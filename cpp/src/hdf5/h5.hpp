@@ -1,6 +1,7 @@
 // Thin RAII layer over the libhdf5 C API: every call that can fail is checked once here and
 // turned into bsp::Hdf5Error naming the file, the object and HDF5's own reason.
 // Note: h5py wheels bundle another libhdf5; never pass these handles to Python.
+// Private to bsp_core (with libhdf5's headers): no public header exposes HDF5.
 #pragma once
 #include <hdf5.h>
 
@@ -77,6 +78,9 @@ class Group {
   Handle h_;
   std::string path_, file_;
 };
+
+// libhdf5's version, "major.minor.release" (library_versions()).
+std::string library_version();
 
 class File {
  public:
