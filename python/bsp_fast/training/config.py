@@ -60,7 +60,8 @@ OPTIONS: tuple = (
        metavar="RUN_OR_CKPT"),
     _o("seed", "int", SEED, "seed of weights, train-time noise/augmentation and batch order; "
        "the same seed on the same data gives the same metrics on CPU", "run", minimum=0),
-    _o("quiet", "flag", False, "no progress bar and no tables on stdout", "run"),
+    _o("quiet", "flag", False, "no progress output and no initial metrics; the results "
+       "table and the path written are still printed", "run"),
     # ------------------------------------------------------------------ data
     _o("clip_length", "int", None, "frames per clip when converting (default 30; 16 with "
        "--benchmark); checked against an existing HDF5 file", "data", minimum=1, metavar="L"),

@@ -167,9 +167,17 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
     warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\).*")
     for name in ("lightning.pytorch", "lightning.fabric"):  # device banners and tips
         logging.getLogger(name).setLevel(logging.WARNING)
+    from lightning.pytorch.callbacks.progress.progress_bar import ProgressBar
+
+    from .progress import progress_callbacks
+
     limit = cfg["limit_batches"] or None
+    callbacks = list(callbacks)
+    given = any(isinstance(c, ProgressBar) for c in callbacks)  # e.g. bsp-predict's
+    bars = [] if given else progress_callbacks(cfg["quiet"])  # plain lines in a log file
+    callbacks += bars
     common = dict(accelerator=cfg["accelerator"], precision=precision,
-                  enable_progress_bar=not cfg["quiet"], enable_model_summary=False,
+                  enable_progress_bar=bool(bars) or given, enable_model_summary=False,
                   deterministic=True, num_sanity_val_steps=0, use_distributed_sampler=False,
                   limit_train_batches=limit, limit_val_batches=limit, limit_test_batches=limit)
     try:
@@ -181,7 +189,7 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
         loggers = [CSVLogger(save_dir=str(tmp), name="logs")]
         extra = _extra_logger(cfg["logger"], tmp, Path(cfg["out"]).name)
         loggers += [extra] if extra is not None else []
-        callbacks = [RunCheckpoint(dirpath=str(tmp / "checkpoints"), filename="best",
+        callbacks += [RunCheckpoint(dirpath=str(tmp / "checkpoints"), filename="best",
                                    monitor="val/loss", mode="min", save_top_k=1,
                                    save_last=True, enable_version_counter=False)]
         if cfg["early_stop"]:
@@ -234,15 +242,17 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
 
     precision = resolve_precision(cfg["precision"], cfg["accelerator"],
                                   model_class(cfg["task"], cfg["model"]))
-    dm = make_datamodule(cfg)
-    prepare_data(dm, convert=not child)
+    # the model first: a bad --hp is refused before any data is converted (the data setup
+    # draws no random number, so the weights are those of the seed either way)
     pl.seed_everything(cfg["seed"], workers=True, verbose=False)
     try:
         module = TASK_MODULES[cfg["task"]](cfg["model"], hparams=cfg["hp"], lr=cfg["lr"],
                                            config=cfg)
-    except (ValueError, TypeError) as exc:
+    except (ValueError, TypeError, AssertionError, RuntimeError) as exc:
         raise C.ConfigError(f"model {cfg['model']!r}: {exc}") from None
     check_precision(precision, cfg["accelerator"])
+    dm = make_datamodule(cfg)
+    prepare_data(dm, convert=not child)
     ckpt_path = None
     if resume is not None:
         ckpt_path = resume["ckpt"]
@@ -420,11 +430,10 @@ def main(argv=None) -> int:
         return 130
     if result is None:  # a DDP process started by Lightning
         return 0
-    if not cli.get("quiet") and not result.config.get("quiet"):
-        from .tables import runs_table
+    from .tables import runs_table  # printed with --quiet too: the result of the command
 
-        print(runs_table([result.run_dir]))
-        print(f"wrote {result.run_dir}")
+    print(runs_table([result.run_dir]))
+    print(f"wrote {result.run_dir}")
     return 0
 
 
