@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 import sys
 import threading
 import time
@@ -30,7 +31,7 @@ from . import report as _report
 from .errors import UnusableConversion
 from .inputs import dataset_csv, dataset_fov, refuse_inputs_as_output
 
-__all__ = ["convert", "conversion_settings"]
+__all__ = ["convert", "conversion_settings", "clip_settings"]
 
 
 
@@ -55,6 +56,34 @@ def _positive(name, v, allow_none=True):
         raise ValueError(f"{name} must be a positive integer, got {v!r}")
 
 
+def clip_settings(*, clip_length=None, clip_offset=None, eval_clip_offset=None,
+                  min_video_length=None, label=CONVERT["label"], benchmark=False,
+                  val_frac=CONVERT["val_frac"], test_frac=CONVERT["test_frac"],
+                  seed=CONVERT["seed"], balance=False) -> dict:
+    """bsp-convert's clip options (also bsp-interop's), validated and resolved: defaults
+    from :data:`bsp_fast.defaults.CONVERT`, ``label_fraction`` of ``label``; raises
+    ValueError listing what is allowed."""
+    if clip_length is None:
+        clip_length = CONVERT["benchmark_clip_length"] if benchmark else CONVERT["clip_length"]
+    if clip_offset is None:
+        clip_offset = CONVERT["benchmark_clip_offset"] if benchmark else clip_length
+    for name, v in (("clip_length", clip_length), ("clip_offset", clip_offset),
+                    ("eval_clip_offset", eval_clip_offset), ("min_video_length", min_video_length)):
+        _positive(name, v)
+    for name, v in (("val_frac", val_frac), ("test_frac", test_frac)):
+        if not (isinstance(v, (int, float)) and 0 <= v < 1):
+            raise ValueError(f"{name} must lie in [0, 1), got {v!r}")
+    if val_frac + test_frac >= 1:
+        raise ValueError("val_frac + test_frac must be below 1")
+    if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    return dict(clip_length=clip_length, clip_offset=clip_offset,
+                eval_clip_offset=eval_clip_offset or clip_offset,
+                min_video_length=min_video_length or clip_length, label=label,
+                label_fraction=_label_fraction(label), benchmark=bool(benchmark),
+                val_frac=val_frac, test_frac=test_frac, seed=int(seed), balance=bool(balance))
+
+
 def conversion_settings(dataset, *, clip_length=None, clip_offset=None, eval_clip_offset=None,
                         fov=None, min_video_length=None, label=CONVERT["label"], benchmark=False,
                         val_frac=CONVERT["val_frac"], test_frac=CONVERT["test_frac"],
@@ -64,21 +93,13 @@ def conversion_settings(dataset, *, clip_length=None, clip_offset=None, eval_cli
     ``settings`` of its report and the ``settings_json`` attribute of the file): defaults
     filled in, the FOV looked up in the dataset's config.yaml. Raises ValueError."""
     root, _ = dataset_csv(dataset)
-    if clip_length is None:
-        clip_length = CONVERT["benchmark_clip_length"] if benchmark else CONVERT["clip_length"]
-    if clip_offset is None:
-        clip_offset = CONVERT["benchmark_clip_offset"] if benchmark else clip_length
-    for name, v in (("clip_length", clip_length), ("clip_offset", clip_offset),
-                    ("eval_clip_offset", eval_clip_offset), ("min_video_length", min_video_length)):
-        _positive(name, v)
+    clip = clip_settings(clip_length=clip_length, clip_offset=clip_offset,
+                         eval_clip_offset=eval_clip_offset, min_video_length=min_video_length,
+                         label=label, benchmark=benchmark, val_frac=val_frac,
+                         test_frac=test_frac, seed=seed, balance=balance)
+    clip.pop("label_fraction")
     if not isinstance(crop_size, int) or isinstance(crop_size, bool) or not 8 <= crop_size <= 1024:
         raise ValueError(f"crop_size must be an integer in [8, 1024], got {crop_size!r}")
-    for name, v in (("val_frac", val_frac), ("test_frac", test_frac)):
-        if not (isinstance(v, (int, float)) and 0 <= v < 1):
-            raise ValueError(f"{name} must lie in [0, 1), got {v!r}")
-    if val_frac + test_frac >= 1:
-        raise ValueError("val_frac + test_frac must be below 1")
-    _label_fraction(label)
     fov_source = "argument"
     if fov is None:
         fov, fov_source = dataset_fov(root), "config.yaml"
@@ -86,11 +107,7 @@ def conversion_settings(dataset, *, clip_length=None, clip_offset=None, eval_cli
             fov, fov_source = CONVERT["fov"], "default"
     if not (0 < float(fov) < 180):
         raise ValueError(f"fov must lie in (0, 180) degrees, got {fov!r}")
-    return dict(clip_length=clip_length, clip_offset=clip_offset,
-                eval_clip_offset=eval_clip_offset or clip_offset,
-                min_video_length=min_video_length or clip_length, label=label,
-                benchmark=bool(benchmark), val_frac=val_frac, test_frac=test_frac,
-                seed=int(seed), balance=bool(balance), fov=float(fov), fov_source=fov_source,
+    return dict(**clip, fov=float(fov), fov_source=fov_source,
                 compress=bool(compress), media=bool(media),
                 crop_size=int(crop_size) if media else None,
                 skip_bad_media=bool(skip_bad_media) if media else None)

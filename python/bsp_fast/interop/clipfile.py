@@ -17,53 +17,13 @@ import numpy as np
 from .. import __version__
 from .._native import core as _core
 from ..atomic import atomic_output
-from ..defaults import CONVERT
+from ..conversion.api import clip_settings
 from ..skeletons import CARLA, skeleton_map
 from .readers import BadInput, Detections
 
-__all__ = ["clip_settings", "write_clip_file"]
+__all__ = ["clip_settings", "write_clip_file"]  # clip_settings: the converter's own
 
 _STR_META = ("video_id", "pedestrian_id", "age", "gender", "model", "map")
-
-
-def _positive(name, v):
-    if v is not None and (not isinstance(v, int) or isinstance(v, bool) or v <= 0):
-        raise ValueError(f"{name} must be a positive integer, got {v!r}")
-
-
-def clip_settings(*, clip_length=None, clip_offset=None, eval_clip_offset=None,
-                  min_video_length=None, label=CONVERT["label"], benchmark=False,
-                  val_frac=CONVERT["val_frac"], test_frac=CONVERT["test_frac"],
-                  seed=CONVERT["seed"], balance=False) -> dict:
-    """bsp-convert's clip options, validated and resolved the same way (defaults from
-    :data:`bsp_fast.defaults.CONVERT`); raises ValueError listing what is allowed."""
-    if clip_length is None:
-        clip_length = CONVERT["benchmark_clip_length"] if benchmark else CONVERT["clip_length"]
-    if clip_offset is None:
-        clip_offset = CONVERT["benchmark_clip_offset"] if benchmark else clip_length
-    for name, v in (("clip_length", clip_length), ("clip_offset", clip_offset),
-                    ("eval_clip_offset", eval_clip_offset), ("min_video_length", min_video_length)):
-        _positive(name, v)
-    for name, v in (("val_frac", val_frac), ("test_frac", test_frac)):
-        if not (isinstance(v, (int, float)) and 0 <= v < 1):
-            raise ValueError(f"{name} must lie in [0, 1), got {v!r}")
-    if val_frac + test_frac >= 1:
-        raise ValueError("val_frac + test_frac must be below 1")
-    fraction = 0.0
-    if label != "last":
-        try:
-            fraction = float(label[4:]) if str(label).startswith("any:") else -1.0
-        except ValueError:
-            fraction = -1.0
-        if not 0.0 < fraction <= 1.0:
-            raise ValueError(f"label must be 'last' or 'any:F' with 0 < F <= 1, got {label!r}")
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
-    return dict(clip_length=clip_length, clip_offset=clip_offset,
-                eval_clip_offset=eval_clip_offset or clip_offset,
-                min_video_length=min_video_length or clip_length, label=label,
-                label_fraction=fraction, benchmark=bool(benchmark), val_frac=val_frac,
-                test_frac=test_frac, seed=seed, balance=bool(balance))
 
 
 def _codes(names: list) -> tuple:
