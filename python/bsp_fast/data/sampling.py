@@ -108,6 +108,7 @@ class ContiguousBatchSampler(torch.utils.data.DistributedSampler):
         self._seed = seed if seed is not None else derived_seed()
         self._seed_shared = seed is not None or not self.shuffle
         self.epoch = 0
+        self._skip = None
 
     # ----------------------------------------------------------------- ranks
     @property
@@ -177,10 +178,17 @@ class ContiguousBatchSampler(torch.utils.data.DistributedSampler):
             out.append(order[start + r * b:start + (r + 1) * b])
         return out
 
+    def skip_batches(self, epoch: int, count: int) -> None:
+        """The next iteration over epoch ``epoch`` leaves out its first ``count`` batches
+        (a run resumed mid-epoch: those were trained on before the interruption)."""
+        self._skip = (int(epoch), int(count))
+
     def __iter__(self):
         epoch = self.epoch
         self.epoch += 1
-        for b in self.batches(epoch):
+        skip = self._skip[1] if self._skip is not None and self._skip[0] == epoch else 0
+        self._skip = None
+        for b in self.batches(epoch)[skip:]:
             yield IndexBatch(b.tolist(), epoch)
 
 

@@ -119,6 +119,9 @@ OPTIONS: tuple = (
        "support it and, on CPUs with AVX512-BF16/AMX, for the models measured faster in "
        "bf16 there; 32 otherwise (see docs/training.md for the measurements)", "training",
        choices=PRECISIONS),
+    _o("checkpoint_every", "str", "10m", "also save checkpoints/last.ckpt every this long "
+       "within an epoch (e.g. 10m, 90s, 1h; 0: at epoch ends only), so a killed run "
+       "resumes near where it stopped (--resume)", "training", metavar="DURATION"),
     _o("limit_batches", "int", 0, "use at most this many batches of each split per epoch "
        "(0: all; for smoke tests - metrics then cover part of a split)", "training",
        minimum=0, metavar="N"),
@@ -277,6 +280,12 @@ def validate(cfg: dict) -> dict:
         raise ConfigError("no data given (--data DATASET_DIR or clips.h5)")
     if cfg["label"] != "last" and not cfg["label"].startswith("any:"):
         raise ConfigError(f"label must be 'last' or 'any:F', got {cfg['label']!r}")
+    from .lifecycle import parse_duration
+
+    try:
+        parse_duration(cfg.get("checkpoint_every", 0))
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
     if cfg["task"] == "pose_estimation" and (cfg["noise"] or cfg["mjp"]):
         raise ConfigError("noise/mjp deform 2D joint inputs; pose_estimation reads images")
     from .. import models

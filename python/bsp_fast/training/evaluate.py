@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import config as C
-from .runs import RunError, resolve_checkpoint, write_json
+from .runs import RunError, read_run, resolve_checkpoint, write_json
 
 __all__ = ["evaluate", "main", "EvalResult", "load_run"]
 
@@ -43,6 +43,12 @@ def load_run(run, which: str = "best", data=None, **overrides):
         info = checkpoint_info(ckpt)
     except ValueError as exc:
         raise RunError(str(exc)) from None
+    run_cfg = read_run(run_dir)["config"] if run_dir is not None else None
+    if run_cfg is not None and (run_cfg.get("task"), run_cfg.get("model")) != \
+            (info["task"], info["model"]):
+        raise RunError(f"{ckpt} is a {info['task']!r} checkpoint of model {info['model']!r}, "
+                       f"but {run_dir / 'config.yaml'} is a {run_cfg.get('task')!r} run of "
+                       f"model {run_cfg.get('model')!r}; refusing to score it as either")
     cfg = C.defaults()
     saved = {k: v for k, v in (info.get("config") or {}).items() if k in C.BY_NAME}
     cfg.update(C.normalise(saved, f"{ckpt} (saved config)"))

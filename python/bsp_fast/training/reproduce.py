@@ -18,7 +18,7 @@ from pathlib import Path
 
 from . import config as C
 from ..atomic import write_text
-from .runs import RunError, read_run
+from .runs import RunError, read_run, resumable
 from .findings import NA, NO, YES, evaluate_findings, format_value
 from .table_files import (BUDGETS, KINDS, RELATIONS, TABLES, experiments_dir, experiments_dirs,
                           load_table, row_options)
@@ -82,7 +82,12 @@ def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrid
             from .train import train
 
             t0 = time.perf_counter()
-            train(config=str(cfg_path), force=True, quiet=quiet)
+            stopped = None if force else resumable(run_dir)
+            if stopped is not None:  # interrupted or killed: continue, not restart
+                log(f"[{row['name']}] continuing the interrupted run {stopped}")
+                train(resume=str(stopped), quiet=quiet)
+            else:
+                train(config=str(cfg_path), force=True, quiet=quiet)
             log(f"[{row['name']}] done in {time.perf_counter() - t0:.0f} s")
         run = read_run(run_dir)
         m = run["metrics"]

@@ -17,14 +17,19 @@ import os
 import shutil
 from pathlib import Path
 
-from ..atomic import publish, temp_path
+from ..atomic import publish, temp_path, write_text
 
 __all__ = ["RunDirectory", "RunError", "default_run_dir", "resolve_checkpoint", "read_run",
-           "ENV_TMP"]
+           "ENV_TMP", "MARKER", "write_marker", "read_marker", "orphaned_runs",
+           "resume_hint", "resumable"]
 
 #: Set by the process that created the temporary run directory, so DDP processes that
 #: Lightning starts later (they re-run the command) write into the same directory.
 ENV_TMP = "BSP_FAST_RUN_TMP"
+
+#: The file that marks a run directory as incomplete (being written, interrupted or
+#: killed): it holds the epoch and step of the last checkpoint; a finished run has none.
+MARKER = "incomplete.json"
 
 
 class RunError(Exception):
@@ -63,23 +68,43 @@ class RunDirectory:
             raise RunError(f"{self.final} exists and is not a directory")
         self.tmp = self.final.with_name(tmp_name) if tmp_name else temp_path(self.final)
         self.committed = False
+        #: set by the run when it is stopped with a checkpoint worth continuing from: the
+        #: directory is then kept as an incomplete run instead of deleted (``left_in``)
+        self.keep_incomplete = False
+        self.left_in: Path | None = None
 
     def __enter__(self) -> Path:
-        self.final.parent.mkdir(parents=True, exist_ok=True)
-        if self.tmp.exists():  # a stale one of a crashed process with our pid
-            shutil.rmtree(self.tmp)
-        if self.copy_from is not None:
-            shutil.copytree(self.copy_from, self.tmp, symlinks=True)
-        else:
-            self.tmp.mkdir()
+        try:
+            self.final.parent.mkdir(parents=True, exist_ok=True)
+            if self.tmp.exists():  # a stale one of a crashed process with our pid
+                shutil.rmtree(self.tmp)
+            if self.copy_from is not None:
+                shutil.copytree(self.copy_from, self.tmp, symlinks=True)
+            else:
+                self.tmp.mkdir()
+        except OSError as exc:  # read-only or full filesystem, no permission
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            raise RunError(f"--out {self.final}: cannot write the run directory there "
+                           f"({exc.strerror or exc})") from None
         return self.tmp
 
     def __exit__(self, exc_type, exc, tb) -> bool:
         if exc_type is None:
             self.commit()
+        elif self.keep_incomplete:
+            self._leave_incomplete()
         else:
             shutil.rmtree(self.tmp, ignore_errors=True)
         return False
+
+    def _leave_incomplete(self) -> None:
+        """Publishes the stopped run under its final name (``--resume`` it); where that
+        name is taken by something --force may not replace, it stays under ``tmp``."""
+        try:
+            publish(self.tmp, self.final, force=self.force)
+            self.left_in = self.final
+        except OSError:
+            self.left_in = self.tmp
 
     def commit(self) -> None:
         if self.committed:
@@ -146,11 +171,83 @@ def refuse_unsafe_output(out, *, force: bool, inputs=(), in_place=None) -> None:
                        "run directory", code=2)
 
 
+def write_marker(run_dir, **fields) -> None:
+    """Writes (replaces) ``incomplete.json`` of a run being written or left incomplete."""
+    doc = dict(fields, updated=_dt.datetime.now().isoformat(timespec="seconds"))
+    write_text(Path(run_dir) / MARKER, json.dumps(doc, indent=2) + "\n")
+
+
+def read_marker(run_dir) -> dict | None:
+    """``incomplete.json`` of a run directory (None: a finished run or not a run)."""
+    p = Path(run_dir) / MARKER
+    if not p.is_file():
+        return None
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return doc if isinstance(doc, dict) else {}
+
+
+def _alive(pid) -> bool:
+    try:
+        os.kill(int(pid), 0)
+    except (ProcessLookupError, ValueError, TypeError):
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def orphaned_runs(out) -> list:
+    """Temporary directories of runs of ``--out out`` whose process died (``kill -9``, a
+    power cut) after saving a checkpoint, newest checkpoint first: ``--resume out``
+    continues the first."""
+    out = Path(out).absolute()
+    found = []
+    for p in out.parent.glob(f".{out.name}.tmp-*"):
+        marker = read_marker(p)
+        last = p / "checkpoints" / "last.ckpt"
+        if marker is None or not last.is_file() or not (p / "config.yaml").is_file():
+            continue
+        if marker.get("pid") is not None and _alive(marker["pid"]) \
+                and marker.get("state") == "running":
+            continue  # still training
+        found.append((last.stat().st_mtime, p))
+    return [p for _, p in sorted(found, reverse=True)]
+
+
+def resumable(run_dir) -> Path | None:
+    """The incomplete run to continue for ``run_dir``: the directory itself if it is an
+    interrupted run, else a killed run's temporary directory (None: nothing to continue)."""
+    p = Path(run_dir)
+    if p.is_dir():
+        ok = read_marker(p) is not None and (p / "checkpoints" / "last.ckpt").is_file()
+        return p if ok else None
+    orphans = orphaned_runs(p)
+    return orphans[0] if orphans else None
+
+
+def resume_hint(run_dir) -> str:
+    """``interrupted at epoch E step S; continue with: bsp-train --resume DIR``."""
+    m = read_marker(run_dir) or {}
+    where = f"epoch {m.get('epoch', '?')} step {m.get('step', '?')}"
+    return f"{where}; continue with: bsp-train --resume {run_dir}"
+
+
 def resolve_checkpoint(path, which: str = "best") -> tuple:
     """``path`` is a run directory or a ``.ckpt`` file -> ``(ckpt_path, run_dir or None)``.
     ``which``: ``best`` or ``last`` checkpoint of a run directory."""
     p = Path(path)
+    if which == "last" and not p.exists():
+        orphans = orphaned_runs(p)  # a run killed before it could be published
+        if orphans:
+            p = orphans[0]
     if p.is_dir():
+        marker = read_marker(p)
+        if marker is not None and which != "last":
+            raise RunError(f"{p}: an incomplete run ({marker.get('state', 'stopped')} at "
+                           f"{resume_hint(p)}); it has no final metrics yet")
         ckpt = p / "checkpoints" / f"{which}.ckpt"
         if not ckpt.is_file():
             raise RunError(f"{p}: not a bsp-train run directory (no checkpoints/{which}.ckpt)")
@@ -182,7 +279,7 @@ def read_run(run_dir) -> dict:
 
 def write_json(obj, path) -> None:
     """JSON with NaN/inf written as null (strict JSON readers choke on NaN)."""
-    Path(path).write_text(json.dumps(_finite(obj), indent=2) + "\n", encoding="utf-8")
+    write_text(path, json.dumps(_finite(obj), indent=2) + "\n")
 
 
 def _finite(obj):

@@ -19,7 +19,7 @@ from ..atomic import publish, temp_path, write_text
 from ..defaults import SEED
 from .breakdown import FILE as BREAKDOWN
 from .table_files import BUDGETS, RULE_KEYS, check_budget_rule, load_table, row_options
-from .runs import RunError, read_run
+from .runs import RunError, read_run, resumable
 
 __all__ = ["RULE_KEYS", "check_budget_rule", "seed_list", "reproduce_seeds", "add_options",
            "learning_curves"]
@@ -82,11 +82,13 @@ def _convert_once(plan) -> None:
             done.add(key)
 
 
-def _command(cfg_path, quiet: bool) -> list:
+def _command(cfg_path, quiet: bool, stopped=None) -> list:
     """``python -m bsp_fast train --config CFG`` of this very package (a worker process
-    that imports nothing from its parent: no forked torch or HDF5 state)."""
-    return [sys.executable, "-m", "bsp_fast", "train", "--config", str(cfg_path), "--force"] \
-        + (["--quiet"] if quiet else [])
+    that imports nothing from its parent: no forked torch or HDF5 state), or ``--resume
+    RUN`` of an interrupted run."""
+    what = ["--resume", str(stopped)] if stopped is not None else \
+        ["--config", str(cfg_path), "--force"]
+    return [sys.executable, "-m", "bsp_fast", "train", *what] + (["--quiet"] if quiet else [])
 
 
 def _env() -> dict:
@@ -104,9 +106,13 @@ def _run(todo, jobs: int, quiet: bool, log) -> None:
     if jobs <= 1:  # in this process, one run after the other
         from .train import train
 
-        for name, cfg_path in todo:
+        for name, cfg_path, stopped in todo:
             t0 = time.perf_counter()
-            train(config=str(cfg_path), force=True, quiet=quiet)
+            if stopped is not None:  # interrupted or killed: continue, not restart
+                log(f"[{name}] continuing the interrupted run {stopped}")
+                train(resume=str(stopped), quiet=quiet)
+            else:
+                train(config=str(cfg_path), force=True, quiet=quiet)
             log(f"[{name}] done in {time.perf_counter() - t0:.0f} s")
         return
     import subprocess
@@ -117,9 +123,9 @@ def _run(todo, jobs: int, quiet: bool, log) -> None:
     try:
         while pending or running:
             while pending and len(running) < jobs:
-                name, cfg_path = pending.pop(0)
+                name, cfg_path, stopped = pending.pop(0)
                 err = tempfile.TemporaryFile(mode="w+")
-                proc = subprocess.Popen(_command(cfg_path, quiet), env=env, stderr=err,
+                proc = subprocess.Popen(_command(cfg_path, quiet, stopped), env=env, stderr=err,
                                         stdout=subprocess.DEVNULL if quiet else None)
                 running.append((name, proc, err, time.perf_counter()))
             time.sleep(0.2)
@@ -194,8 +200,9 @@ def reproduce_seeds(table, data, budget: str = "quick", out="runs", *, seeds: in
             log(f"bsp-train --config {cfg_path}")
         elif (run_dir / "metrics.json").is_file() and not force:
             log(f"[{row['name']} seed {seed}] reusing {run_dir} (--force to train again)")
-        else:
-            todo.append((f"{row['name']} seed {seed}", cfg_path))
+        else:  # an interrupted run of an earlier call continues (unless --force)
+            todo.append((f"{row['name']} seed {seed}", cfg_path,
+                         None if force else resumable(run_dir)))
     if dry_run:
         return {"table": tab["table"], "budget": budget, "dir": str(base), "results": {}}
     if todo:

@@ -13,13 +13,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import config as C
-from .runs import ENV_TMP, RunDirectory, RunError, default_run_dir, read_run, \
-    refuse_unsafe_output, resolve_checkpoint, write_json
+from ..atomic import remove
+from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, read_marker, \
+    read_run, refuse_unsafe_output, resolve_checkpoint, resume_hint, write_json, write_marker
 from .precision import check_precision, native_bf16, resolve_precision
+from .setup import make_datamodule, make_trainer, prepare_data, rank as _rank
 from .tasks import get_task
 
 # (resolve_precision, native_bf16 and check_precision live in .precision; importable here too)
-__all__ = ["train", "main", "TrainResult", "resolve_precision", "native_bf16", "check_precision"]
+__all__ = ["train", "main", "TrainResult", "resolve_precision", "native_bf16", "check_precision",
+           "make_datamodule", "make_trainer", "prepare_data"]
 
 
 @dataclass
@@ -47,24 +50,37 @@ def resolve_config(cli: dict, config_path=None) -> tuple:
     resume = None
     target = cli.get("resume", from_yaml.get("resume"))
     if target:
-        ckpt, run_dir = resolve_checkpoint(target, "last")
-        if run_dir is not None:
-            saved = read_run(run_dir)["config"]
-        else:
-            from .tasks import checkpoint_info
+        from .tasks import checkpoint_info
 
-            saved = checkpoint_info(ckpt).get("config") or {}
+        ckpt, run_dir = resolve_checkpoint(target, "last")
+        try:  # truncated, foreign or pickled files: one line, before any work
+            info = checkpoint_info(ckpt)
+        except ValueError as exc:
+            raise RunError(f"--resume {target}: {exc}") from None
+        saved = read_run(run_dir)["config"] if run_dir is not None else \
+            (info.get("config") or {})
+        if (info.get("task"), info.get("model")) != (saved.get("task"), saved.get("model")):
+            raise RunError(f"--resume {target}: {ckpt} is a {info.get('task')!r} checkpoint "
+                           f"of model {info.get('model')!r}, but its run is "
+                           f"{saved.get('task')!r} / {saved.get('model')!r}")
+        resolved = saved.get("resolved") or {}
         known = {k: v for k, v in saved.items() if k in C.BY_NAME
                  and k not in ("resume", "force", "out", "quiet")}
+        if resolved.get("data") and known.get("data") and not Path(known["data"]).exists():
+            known["data"] = resolved["data"]  # a relative path, resumed from elsewhere
         cfg.update(C.normalise(known, f"{target} (saved config)"))
-        resume = {"ckpt": Path(ckpt), "run_dir": run_dir}
+        orphan = run_dir is not None and ".tmp-" in run_dir.name and run_dir.name[0] == "."
+        resume = {"ckpt": Path(ckpt), "run_dir": run_dir, "orphan": orphan}
+        if orphan:  # a killed run: it goes to the --out it was started with
+            cfg["out"] = (read_marker(run_dir) or {}).get("out") or resolved.get("out")
         for key in ("task", "model"):
             want = cli.get(key, from_yaml.get(key))
             if want is not None and want != saved.get(key):
                 raise C.ConfigError(f"--resume {target} is a {saved.get('task')!r} run of "
                                     f"model {saved.get('model')!r}; it cannot continue as "
                                     f"{key} {want!r}")
-        if cli.get("out") is None and from_yaml.get("out") is None and run_dir is not None:
+        if cli.get("out") is None and from_yaml.get("out") is None and run_dir is not None \
+                and not orphan:
             cfg["out"] = str(run_dir)
     cfg.update(from_yaml)
     cfg.update(cli)
@@ -72,140 +88,6 @@ def resolve_config(cli: dict, config_path=None) -> tuple:
     if cfg["out"] is None:
         cfg["out"] = str(default_run_dir(cfg["task"], cfg["model"]))
     return cfg, resume
-
-
-def _rank() -> int:  # Lightning's: from the launcher's environment, then the trainer's
-    from lightning.pytorch.utilities import rank_zero_only
-
-    return rank_zero_only.rank
-
-
-# ---------------------------------------------------------------------- data
-def make_datamodule(cfg: dict, h5=None):
-    """The ``BSPDataModule`` of a config (``h5``: an existing file to use instead)."""
-    from ..data import BSPDataModule
-
-    data = Path(h5 or cfg["data"])
-    if not data.exists():
-        raise RunError(f"{data}: no such dataset directory or HDF5 file")
-    # strings, not Paths: the data module's arguments are saved in checkpoints, which are
-    # read back with torch.load(weights_only=True)
-    if data.is_dir() or data.name == "data.csv":
-        paths = dict(dataset_dir=str(data if data.is_dir() else data.parent))
-    else:
-        paths = dict(h5_path=str(data))
-    convert = dict(label=cfg["label"], crop_size=cfg["crop_size"], seed=cfg["split_seed"])
-    for key in ("fov", "eval_clip_offset"):
-        if cfg[key] is not None:
-            convert[key] = cfg[key]
-    task = get_task(cfg["task"])
-    dataset_options = task.dataset_options(cfg)
-    augment = cfg["augment"] and task.augments
-    return BSPDataModule(**paths, task=cfg["task"], clip_length=cfg["clip_length"],
-                         clip_offset=cfg["clip_offset"], benchmark=cfg["benchmark"],
-                         balance=cfg["balance"], noise=cfg["noise"], mjp=cfg["mjp"],
-                         batch_size=cfg["batch_size"], num_workers=cfg["workers"],
-                         augment=augment, seed=cfg["seed"], sampler_seed=cfg["seed"],
-                         convert_options=convert, dataset_options=dataset_options,
-                         verbose=not cfg["quiet"] and _rank() == 0)
-
-
-def prepare_data(dm, stages=("fit", "test"), convert: bool = True) -> None:
-    """Converts (when needed) and opens the splits; any problem with the data becomes a
-    :class:`RunError` naming the file."""
-    try:
-        if convert:
-            dm.prepare_data()
-        for stage in stages:
-            dm.setup(stage)
-    except (ValueError, OSError, KeyError) as exc:
-        raise RunError(f"data: {exc}") from None
-    except Exception as exc:  # the C++ converter's typed errors
-        if type(exc).__module__.startswith("bsp_fast"):
-            raise RunError(f"data: {type(exc).__name__}: {exc}") from None
-        raise
-    for split, ds in dm.datasets.items():
-        if len(ds) == 0:
-            raise RunError(f"data: {dm.h5_path}: split {split!r} holds no clips")
-
-
-# ---------------------------------------------------------------------- trainer
-def _extra_logger(kind: str, tmp: Path, name: str):
-    import importlib.util
-
-    from .._extras import install_hint
-
-    if kind == "csv":
-        return None
-    if kind == "tensorboard":
-        if not any(importlib.util.find_spec(m) for m in ("tensorboard", "tensorboardX")):
-            raise C.ConfigError(install_hint("tensorboard", "--logger tensorboard"))
-        from lightning.pytorch.loggers import TensorBoardLogger
-
-        return TensorBoardLogger(save_dir=str(tmp), name="tensorboard", default_hp_metric=False)
-    if importlib.util.find_spec("wandb") is None:
-        raise C.ConfigError(install_hint("wandb", "--logger wandb"))
-    from lightning.pytorch.loggers import WandbLogger
-
-    return WandbLogger(save_dir=str(tmp), name=name, project="bsp_fast", offline=True)
-
-
-def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = True,
-                 callbacks=()):
-    """The Lightning Trainer of a run (``tmp``: run directory being written) or, with
-    ``fit=False``, an evaluation-only one (no logger, no checkpoints; ``callbacks``)."""
-    import warnings
-
-    import lightning.pytorch as pl
-
-    from .checkpointing import RunCheckpoint
-
-    import logging
-
-    warnings.filterwarnings("ignore", message=r".*does not have many workers.*")
-    warnings.filterwarnings("ignore", message=r".*number of training batches.*")
-    warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\).*")
-    for name in ("lightning.pytorch", "lightning.fabric"):  # device banners and tips
-        logging.getLogger(name).setLevel(logging.WARNING)
-    from lightning.pytorch.callbacks.progress.progress_bar import ProgressBar
-
-    from .progress import progress_callbacks
-
-    limit = cfg["limit_batches"] or None
-    callbacks = list(callbacks)
-    given = any(isinstance(c, ProgressBar) for c in callbacks)  # e.g. bsp-predict's
-    bars = [] if given else progress_callbacks(cfg["quiet"])  # plain lines in a log file
-    callbacks += bars
-    common = dict(accelerator=cfg["accelerator"], precision=precision,
-                  enable_progress_bar=bool(bars) or given, enable_model_summary=False,
-                  deterministic=True, num_sanity_val_steps=0, use_distributed_sampler=False,
-                  limit_train_batches=limit, limit_val_batches=limit, limit_test_batches=limit)
-    try:
-        if not fit:
-            return pl.Trainer(devices=1, logger=False, enable_checkpointing=False,
-                              callbacks=list(callbacks), **common)
-        from lightning.pytorch.loggers import CSVLogger
-
-        loggers = [CSVLogger(save_dir=str(tmp), name="logs")]
-        extra = _extra_logger(cfg["logger"], tmp, Path(cfg["out"]).name)
-        loggers += [extra] if extra is not None else []
-        callbacks += [RunCheckpoint(dirpath=str(tmp / "checkpoints"), filename="best",
-                                   monitor="val/loss", mode="min", save_top_k=1,
-                                   save_last=True, enable_version_counter=False)]
-        if cfg["early_stop"]:
-            from lightning.pytorch.callbacks import EarlyStopping
-
-            callbacks.append(EarlyStopping(monitor="val/loss", mode="min",
-                                           patience=cfg["early_stop"]))
-        return pl.Trainer(devices=cfg["devices"], strategy=cfg["strategy"],
-                          num_nodes=cfg.get("num_nodes") or 1,
-                          max_epochs=cfg["epochs"], max_steps=cfg.get("max_steps") or -1,
-                          logger=loggers, callbacks=callbacks,
-                          default_root_dir=str(tmp), log_every_n_steps=50, **common)
-    except C.ConfigError:
-        raise
-    except Exception as exc:  # e.g. --accelerator gpu without a GPU
-        raise C.ConfigError(f"cannot set up training ({type(exc).__name__}: {exc})") from None
 
 
 # ---------------------------------------------------------------------- the run
@@ -218,9 +100,19 @@ def _shared_tmp(cfg: dict) -> str | None:
 
 
 def _train(cli: dict, config_path=None) -> TrainResult | None:
+    from .lifecycle import signals
+
+    with signals() as sig:  # SIGINT/SIGTERM: Interrupted, deferred to batch ends in fit
+        result = _run(cli, config_path, sig)
+    return result
+
+
+def _run(cli: dict, config_path, sig) -> TrainResult | None:
     cfg, resume = resolve_config(cli, config_path)
     import lightning.pytorch as pl
     import torch
+
+    from .lifecycle import Interrupted, Lifecycle, OutputWriteError, parse_duration
 
     from .initial import log_initial
     from .tasks import TASK_MODULES
@@ -258,7 +150,8 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
         ckpt_path = resume["ckpt"]
     if child:
         tmp = Path(os.environ[ENV_TMP])
-        trainer = make_trainer(cfg, tmp, precision)
+        life = Lifecycle(tmp, parse_duration(cfg["checkpoint_every"]), sig)
+        trainer = make_trainer(cfg, tmp, precision, callbacks=[life])
         if resume is not None and resume["run_dir"] is not None:
             ckpt_path = tmp / "checkpoints" / "last.ckpt"
         trainer.fit(module, datamodule=dm, ckpt_path=ckpt_path)
@@ -268,10 +161,22 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
     copy_from = resume["run_dir"] if resume is not None else None
     refuse_unsafe_output(final, force=cfg["force"], inputs=_inputs(cfg, resume, config_path),
                          in_place=copy_from)  # again: the output may have appeared meanwhile
-    with RunDirectory(final, force=cfg["force"], copy_from=copy_from, tmp_name=shared) as tmp:
+    run = RunDirectory(final, force=cfg["force"], copy_from=copy_from, tmp_name=shared)
+    with run as tmp:
+        t_start = time.time()
+        previous = read_marker(tmp)  # an incomplete run being continued
+        life_marker = {"out": str(final.absolute()), "pid": os.getpid()}
+        write_marker(tmp, **life_marker, state="running", epoch=None, step=None,
+                     **({"fit_done": previous["fit_done"]}
+                        if previous and previous.get("fit_done") else {}))
+        _write_config(cfg, tmp, precision)  # now: an interrupted run can be resumed
         if copy_from is not None:
             ckpt_path = tmp / "checkpoints" / "last.ckpt"
-        trainer = make_trainer(cfg, tmp, precision)
+        life = Lifecycle(tmp, parse_duration(cfg["checkpoint_every"]), sig, life_marker)
+        # a run stopped after its training ended (while testing or writing metrics):
+        # its last epoch again as the cap, so fit restores the callbacks and returns
+        done = previous.get("fit_done") if previous else None
+        trainer = make_trainer(cfg, tmp, precision, callbacks=[life], max_epochs=done)
         if not cfg["quiet"]:
             n = {s: len(d) for s, d in dm.datasets.items()}
             print(f"bsp-train: {cfg['task']} / {cfg['model']}, {trainer.accelerator.__class__.__name__.replace('Accelerator', '').lower()} "
@@ -279,9 +184,9 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
                   f"{n.get('val')} val, {n.get('test')} test clips of {dm.h5_path} -> {final}")
         seconds = {}
         t0 = time.perf_counter()
-        previous = read_run(copy_from)["metrics"] if copy_from is not None else None
-        if previous and previous.get("initial"):
-            initial = previous["initial"]
+        finished = read_run(copy_from)["metrics"] if copy_from is not None else None
+        if finished and finished.get("initial"):
+            initial = finished["initial"]
         else:
             initial = _initial(cfg, dm, module.net)
         seconds["initial"] = time.perf_counter() - t0
@@ -290,15 +195,39 @@ def _train(cli: dict, config_path=None) -> TrainResult | None:
         os.environ[ENV_TMP] = str(tmp)
         try:
             t0 = time.perf_counter()
-            trainer.fit(module, datamodule=dm, ckpt_path=ckpt_path)
+            trainer.fit(module, datamodule=dm, ckpt_path=ckpt_path, weights_only=True)
+            if sig.received is not None:  # during the last validation: stop before testing
+                raise Interrupted(sig.received)
             seconds["fit"] = time.perf_counter() - t0
+            write_marker(tmp, **life_marker, state="running", fit_done=trainer.current_epoch,
+                         epoch=trainer.current_epoch, step=trainer.global_step)
             t0 = time.perf_counter()
             trainer.test(module, datamodule=dm, ckpt_path="best", verbose=False)
             seconds["test"] = time.perf_counter() - t0
+            result = _finish(cfg, tmp, final, trainer, initial, precision, seconds)
+        except (Interrupted, OutputWriteError) as exc:
+            last = tmp / "checkpoints" / "last.ckpt"
+            if last.is_file() and last.stat().st_mtime >= t_start:
+                run.keep_incomplete = True  # something to continue from
+                marker = read_marker(tmp) or {}
+                marker.update(life_marker, state="interrupted" if isinstance(
+                    exc, Interrupted) else "failed", reason=str(exc))
+                marker.pop("updated", None)
+                write_marker(tmp, **marker)
+            exc.run = run  # main() says where the run was left
+            raise
         finally:
             os.environ.pop(ENV_TMP, None)
-        result = _finish(cfg, tmp, final, trainer, initial, precision, seconds)
+    if resume is not None and resume.get("orphan"):
+        remove(resume["run_dir"])  # continued and published under its own name
     return result
+
+
+def _stopped(exc, run) -> str:
+    """The one line saying where a stopped run is and how to continue it."""
+    if run is None or run.left_in is None:
+        return "nothing written"
+    return resume_hint(run.left_in)
 
 
 def _inputs(cfg: dict, resume, config_path=None) -> list:
@@ -317,8 +246,8 @@ def _initial(cfg: dict, dm, model=None) -> dict:
 
 
 def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds):
-    from .. import __version__
     from .curves import plot_curves, read_logs
+    from .lifecycle import OutputWriteError
 
     test = dict(trainer.lightning_module.results.get("test", {}))
     from .breakdown import write_breakdown
@@ -339,23 +268,43 @@ def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds):
                "epochs": epochs, "best_checkpoint": "checkpoints/best.ckpt",
                "units": {k: units[k] for k in test if k in units}, "precision": precision,
                "world_size": int(trainer.world_size), "seconds": seconds}
-    write_json(metrics, tmp / "metrics.json")
-    import lightning
-    import torch
-
-    extra = {"resolved": {"precision": precision, "h5": str(Path(trainer.datamodule.h5_path).absolute()),
-                          "hparams": metrics["hparams"], "world_size": metrics["world_size"]},
-             "versions": {"bsp_fast": __version__, "torch": str(torch.__version__),
-                          "lightning": str(lightning.__version__)}}
-    # force/resume are actions of this command, not settings of the run
-    C.write_yaml(dict(cfg, force=False, resume=None), tmp / "config.yaml", extra)
-    plot_curves(tmp, cfg["task"], initial=initial.get("val"),
-                title=f"{cfg['task']} / {cfg['model']}", best_epoch=best_epoch)
+    try:
+        write_json(metrics, tmp / "metrics.json")
+        _write_config(cfg, tmp, precision, h5=trainer.datamodule.h5_path,
+                      hparams=metrics["hparams"], world_size=metrics["world_size"])
+        plot_curves(tmp, cfg["task"], initial=initial.get("val"),
+                    title=f"{cfg['task']} / {cfg['model']}", best_epoch=best_epoch)
+        remove(tmp / MARKER)  # the run is complete
+    except OSError as exc:
+        remove(tmp / "metrics.json")  # no metrics.json: nothing takes it for finished
+        raise OutputWriteError(exc.errno, f"{getattr(exc, 'filename', None) or tmp}: "
+                               f"cannot write the run's results ({exc.strerror or exc}); "
+                               "the checkpoints are intact") from None
     return TrainResult(run_dir=final, metrics=test, val=val, initial=initial,
                        best_checkpoint=final / "checkpoints" / "best.ckpt",
                        last_checkpoint=final / "checkpoints" / "last.ckpt",
                        best_epoch=metrics["best_epoch"], epochs=epochs, config=cfg,
                        seconds=seconds)
+
+
+def _write_config(cfg: dict, tmp: Path, precision: str, **resolved) -> None:
+    """config.yaml (usable as --config): the options as given, and under ``resolved`` what
+    the run resolved, the data and run directory as absolute paths included (so --resume
+    works from any directory)."""
+    import lightning
+    import torch
+
+    from .. import __version__
+
+    extra = {"resolved": {"precision": precision,
+                          "data": str(Path(cfg["data"]).absolute()),
+                          "out": str(Path(cfg["out"]).absolute()),
+                          **{k: (str(Path(v).absolute()) if k == "h5" else v)
+                             for k, v in resolved.items()}},
+             "versions": {"bsp_fast": __version__, "torch": str(torch.__version__),
+                          "lightning": str(lightning.__version__)}}
+    # force/resume are actions of this command, not settings of the run
+    C.write_yaml(dict(cfg, force=False, resume=None), tmp / "config.yaml", extra)
 
 
 def _best_epoch(trainer) -> int | None:
@@ -428,6 +377,21 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("bsp-train: interrupted; nothing written", file=sys.stderr)
         return 130
+    except BaseException as exc:  # SIGINT/SIGTERM (Interrupted) or a full disk
+        from .lifecycle import Interrupted, OutputWriteError
+
+        if isinstance(exc, Interrupted):
+            print(f"bsp-train: interrupted ({exc}) at {_stopped(exc, getattr(exc, 'run', None))}"
+                  if getattr(getattr(exc, "run", None), "left_in", None) else
+                  f"bsp-train: interrupted ({exc}); nothing written", file=sys.stderr)
+            return exc.code
+        if isinstance(exc, OutputWriteError):
+            run = getattr(exc, "run", None)
+            where = (f"; the run is left at {_stopped(exc, run)}"
+                     if getattr(run, "left_in", None) else "; nothing written")
+            print(f"bsp-train: {exc.strerror}{where}", file=sys.stderr)
+            return 1
+        raise
     if result is None:  # a DDP process started by Lightning
         return 0
     from .tables import runs_table  # printed with --quiet too: the result of the command

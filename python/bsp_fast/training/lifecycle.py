@@ -1,0 +1,274 @@
+"""A training run that survives interruption (docs/training.md, "Interrupted runs").
+
+* ``checkpoints/last.ckpt`` is saved at the end of every epoch (``RunCheckpoint``) and,
+  within long epochs, every ``--checkpoint-every`` (:class:`Lifecycle`), each time through
+  :class:`AtomicCheckpointIO`: written under a temporary name and renamed, so a full disk
+  or a kill leaves the previous checkpoint whole.
+* SIGINT and SIGTERM during training finish the current batch, save ``last.ckpt`` and stop
+  with :class:`Interrupted`; ``bsp-train`` then leaves the run as an *incomplete* run
+  directory (``incomplete.json`` holds the epoch and step reached, there is no
+  ``metrics.json``) and exits 130 or 143. Outside training (data conversion, testing) the
+  same signals stop at once.
+* A resumed run continues from ``last.ckpt`` with the batches of the interrupted epoch it
+  had not trained on (the sampler skips the others) and the random state saved with the
+  checkpoint, so it ends with the same weights and metrics as an uninterrupted run.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import random
+import re
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from lightning.fabric.plugins.io.torch_io import TorchCheckpointIO
+from lightning.pytorch.callbacks import Callback
+
+from ..atomic import write_bytes
+from .runs import MARKER, read_marker, write_marker
+
+__all__ = ["Interrupted", "OutputWriteError", "CheckpointWriteError", "AtomicCheckpointIO", "Lifecycle",
+           "signals", "parse_duration", "MARKER", "write_marker", "read_marker"]
+
+_EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+
+class Interrupted(BaseException):
+    """SIGINT or SIGTERM stopped the run (a BaseException: no ``except Exception`` of
+    Lightning or ours swallows it). ``code``: the exit status, 128 + the signal."""
+
+    def __init__(self, signum: int):
+        self.signum = int(signum)
+        self.code = _EXIT.get(self.signum, 128 + self.signum)
+        super().__init__(signal.Signals(self.signum).name)
+
+
+class OutputWriteError(OSError):
+    """A run's file could not be written (full disk, read-only or vanished folder); the
+    message names the file and says what is intact."""
+
+
+class CheckpointWriteError(OutputWriteError):
+    """A checkpoint could not be written; the previous one is intact."""
+
+
+def parse_duration(text) -> float:
+    """``"10m"``, ``"90s"``, ``"1.5h"`` or a number of seconds -> seconds; ``0``/``off``:
+    no checkpoints within epochs. ValueError for anything else."""
+    s = str(text).strip().lower()
+    if s in ("0", "off", "none", "no", "false"):
+        return 0.0
+    m = re.fullmatch(r"(\d+(?:\.\d*)?)\s*(s|m|h|min)?", s)
+    if not m:
+        raise ValueError(f"checkpoint_every expects a duration such as 10m, 90s, 1h or 0 "
+                         f"(off), got {text!r}")
+    unit = {"s": 1, None: 1, "m": 60, "min": 60, "h": 3600}[m.group(2)]
+    return float(m.group(1)) * unit
+
+
+class AtomicCheckpointIO(TorchCheckpointIO):
+    """Lightning's checkpoint writer through bsp_fast's one temp-then-rename helper; a
+    failed write leaves the previous file as it was and raises
+    :class:`CheckpointWriteError` naming the file."""
+
+    def save_checkpoint(self, checkpoint, path, storage_options=None) -> None:
+        if storage_options is not None:
+            raise TypeError("storage_options are not supported")
+        buffer = io.BytesIO()
+        torch.save(checkpoint, buffer)
+        path = Path(path)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_bytes(path, buffer.getbuffer().tobytes())
+        except OSError as exc:
+            raise CheckpointWriteError(exc.errno, f"{path}: cannot save the checkpoint "
+                                       f"({exc.strerror or exc}); the previous one is "
+                                       "intact") from None
+
+
+# ---------------------------------------------------------------------- signals
+class _Signals:
+    """SIGINT/SIGTERM: raise :class:`Interrupted` at once, or, while ``deferred`` (the
+    training loop runs), remember the first one for :class:`Lifecycle` to act on at the end
+    of the batch; a second SIGINT stops at once."""
+
+    def __init__(self):
+        self.received: int | None = None
+        self.deferred = False
+
+    def handler(self, signum, frame):
+        if self.deferred and self.received is None:
+            self.received = signum
+            return
+        if self.deferred and signum == signal.SIGTERM:
+            return  # already stopping at the end of this batch
+        raise Interrupted(signum)
+
+    def install(self) -> None:
+        import threading
+
+        if threading.current_thread() is not threading.main_thread():
+            return  # signal handlers can only be set from the main thread
+        for s in _EXIT:
+            signal.signal(s, self.handler)
+
+
+@contextlib.contextmanager
+def signals():
+    """``with signals() as sig:`` SIGINT and SIGTERM raise :class:`Interrupted` (or are
+    deferred, see :class:`Lifecycle`); the previous handlers come back after."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield _Signals()  # signal handlers can only be set from the main thread
+        return
+    old = {s: signal.getsignal(s) for s in _EXIT}
+    sig = _Signals()
+    sig.install()
+    try:
+        yield sig
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+# ---------------------------------------------------------------------- the callback
+def _rng_state() -> dict:
+    kind, keys, pos, has_gauss, gauss = np.random.get_state()
+    return {"torch": torch.get_rng_state(), "numpy": [kind, keys.tolist(), pos, has_gauss,
+                                                      gauss],
+            "python": [random.getstate()[0], list(random.getstate()[1]),
+                       random.getstate()[2]]}
+
+
+def _set_rng_state(state: dict) -> None:
+    torch.set_rng_state(state["torch"])
+    kind, keys, pos, has_gauss, gauss = state["numpy"]
+    np.random.set_state((kind, np.asarray(keys, dtype=np.uint32), pos, has_gauss, gauss))
+    version, internal, gauss_next = state["python"]
+    random.setstate((version, tuple(internal), gauss_next))
+
+
+class Lifecycle(Callback):
+    """Periodic ``last.ckpt`` within epochs, signal handling at batch ends, and an exact
+    continuation of a run resumed mid-epoch (see the module docstring).
+
+    ``run_dir``: the run's (temporary) directory; ``every``: seconds between checkpoints
+    within an epoch (0: at epoch ends only); ``sig``: the :func:`signals` state;
+    ``marker``: fields written into ``incomplete.json`` with every save."""
+
+    def __init__(self, run_dir, every: float, sig: _Signals, marker: dict | None = None):
+        self.run_dir, self.every, self.sig = Path(run_dir), float(every), sig
+        self.marker = dict(marker or {})
+        self.epoch, self.batches_done, self.step = 0, 0, 0
+        self._last_save = time.monotonic()
+        self._resume_rng = None
+        self._skip = None
+
+    @property
+    def state_key(self) -> str:
+        return "BSPLifecycle"
+
+    @property
+    def last_ckpt(self) -> Path:
+        return self.run_dir / "checkpoints" / "last.ckpt"
+
+    # position and random state travel in every checkpoint Lightning writes
+    def state_dict(self) -> dict:
+        return {"epoch": self.epoch, "batches_done": self.batches_done, "step": self.step,
+                "rng": _rng_state()}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.epoch, self.step = int(state["epoch"]), int(state["step"])
+        self.batches_done = int(state["batches_done"])
+        self._skip = (self.epoch, self.batches_done)
+        # now, before the train loader's first iterator draws its seed from the global
+        # generator (as it did after the save in the uninterrupted run); again at the first
+        # batch of a run resumed mid-epoch (see on_train_start)
+        _set_rng_state(state["rng"])
+        self._resume_rng = state["rng"]
+
+    def on_save_checkpoint(self, trainer, pl_module, checkpoint) -> None:
+        # the running train-loss mean of the epoch (torchmetrics states are not saved)
+        loss = getattr(pl_module, "train_loss", None)
+        if loss is not None:
+            checkpoint["bsp_train_loss"] = {k: v.clone() for k, v in loss.metric_state.items()}
+
+    def on_load_checkpoint(self, trainer, pl_module, checkpoint) -> None:
+        loss = getattr(pl_module, "train_loss", None)
+        for k, v in (checkpoint.get("bsp_train_loss") or {}).items():
+            if loss is not None:
+                setattr(loss, k, v.clone())
+                loss._update_count = 1 if float(v.sum()) else 0
+
+    def on_train_start(self, trainer, pl_module) -> None:
+        sampler = getattr(trainer.train_dataloader, "sampler", None)
+        total = trainer.num_training_batches
+        mid_epoch = self._skip is not None and 0 < self._skip[1] < total
+        if mid_epoch:
+            if not hasattr(sampler, "skip_batches"):
+                raise RuntimeError("resuming mid-epoch needs bsp_fast's batch sampler")
+            sampler.skip_batches(*self._skip)  # the batches trained before the interruption
+        else:
+            self._resume_rng = None  # an epoch-end checkpoint: restored at load
+        self._skip = None
+        self.sig.deferred = True  # from here on a signal stops at the end of the batch
+        self.sig.install()  # over Lightning's SIGTERM handler, which stops mid-validation
+        self._last_save = time.monotonic()
+
+    def on_train_batch_start(self, trainer, pl_module, batch, batch_idx) -> None:
+        if self._resume_rng is not None:  # mid-epoch: dropout continues where it was
+            _set_rng_state(self._resume_rng)
+            self._resume_rng = None
+
+    def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx) -> None:
+        self.epoch, self.batches_done = trainer.current_epoch, batch_idx + 1
+        self.step = trainer.global_step
+        stop = self.sig.received
+        due = bool(self.every) and time.monotonic() - self._last_save >= self.every \
+            and self.batches_done < trainer.num_training_batches
+        if trainer.world_size > 1:  # every process saves (a collective) or none: rank 0 decides
+            stop, due = trainer.strategy.broadcast((stop, due), src=0)
+        if stop is not None:
+            self.save(trainer, state="interrupted", signal=signal.Signals(stop).name)
+            raise Interrupted(stop)
+        if due:
+            self.save(trainer, state="running")
+
+    def on_train_epoch_start(self, trainer, pl_module) -> None:
+        # a signal during validation: the epoch-end checkpoint is already written
+        stop = self.sig.received
+        if trainer.world_size > 1:
+            stop = trainer.strategy.broadcast(stop, src=0)
+        if stop is not None:
+            if trainer.is_global_zero:
+                self.write_marker(state="interrupted", signal=signal.Signals(stop).name)
+            raise Interrupted(stop)
+
+    def on_train_epoch_end(self, trainer, pl_module) -> None:
+        # after validation and RunCheckpoint's best.ckpt: the state a next epoch starts from
+        # (Lightning's save_last writes last.ckpt only when best.ckpt changes)
+        self.save(trainer, state="running")
+
+    def on_train_end(self, trainer, pl_module) -> None:
+        self.sig.deferred = False
+
+    def on_exception(self, trainer, pl_module, exception) -> None:
+        self.sig.deferred = False
+
+    def save(self, trainer, **fields) -> None:
+        trainer.save_checkpoint(self.last_ckpt)  # written by rank 0 only
+        self._last_save = time.monotonic()
+        if trainer.is_global_zero:
+            self.write_marker(**fields)
+
+    def write_marker(self, **fields) -> None:
+        # epoch: 1-based, the epoch in progress (or just finished) at the checkpoint
+        write_marker(self.run_dir, **self.marker, epoch=self.epoch + 1, step=self.step,
+                     batches_done=self.batches_done, checkpoint="checkpoints/last.ckpt",
+                     **fields)

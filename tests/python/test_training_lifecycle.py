@@ -1,0 +1,301 @@
+"""Runs that survive interruption: SIGTERM/SIGINT sent to real bsp-train processes,
+``kill -9`` then ``--resume``, a full disk while saving, broken checkpoints to resume,
+and a resumed run ending exactly where an uninterrupted one does (CPU, one thread)."""
+from __future__ import annotations
+
+import errno
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+import bsp_fast
+from bsp_fast.data.testing import write_clip_file
+from bsp_fast.training import lifecycle
+from bsp_fast.training import runs as runs_mod
+from bsp_fast.training.train import main as train_main
+
+REPO = Path(__file__).resolve().parents[2]
+MODEL = ["lifting", "baseline_3d"]
+HP = {"linear_size": 32, "num_blocks": 1}  # with dropout: the random state must resume too
+EPOCHS = 60
+
+
+@pytest.fixture(scope="module")
+def clips(tmp_path_factory):
+    root = tmp_path_factory.mktemp("lifecycle")
+    write_clip_file(root / "clips.h5", clips=(48, 16, 16), clip_length=8, seed=3)
+    return root / "clips.h5"
+
+
+def _opts(**kw):
+    return dict(dict(epochs=EPOCHS, batch_size=8, hp=HP, quiet=True, threads=1, seed=7), **kw)
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(clips, tmp_path_factory):
+    out = tmp_path_factory.mktemp("whole") / "run"
+    return bsp_fast.train(*MODEL, data=clips, out=out, **_opts())
+
+
+def _env():
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO / "python")] +
+                                        [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    return env
+
+
+def _start(clips, out, *extra, cwd=None):
+    hp = [f"--hp={k}={v}" for k, v in HP.items()]
+    cmd = [sys.executable, "-m", "bsp_fast", "train", *MODEL, "--data", str(clips), "--out",
+           str(out), "--epochs", str(EPOCHS), "--batch-size", "8", "--threads", "1",
+           "--seed", "7", "--quiet", *hp, *extra]
+    return subprocess.Popen(cmd, env=_env(), cwd=cwd, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for_training(out: Path, proc, epoch: int = 3, timeout: float = 120.0) -> Path:
+    """The run's temporary directory once its marker says ``epoch`` was reached."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        assert proc.poll() is None, proc.communicate()
+        for tmp in out.parent.glob(f".{out.name}.tmp-*"):
+            marker = runs_mod.read_marker(tmp) or {}
+            if (marker.get("epoch") or 0) >= epoch:
+                return tmp
+        time.sleep(0.05)
+    proc.kill()
+    raise AssertionError("bsp-train did not reach the epoch in time")
+
+
+def _test_metrics(run: Path) -> dict:
+    return json.loads((run / "metrics.json").read_text())["test"]
+
+
+@pytest.mark.parametrize("signum,code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_signal_saves_and_resume_ends_like_an_uninterrupted_run(clips, uninterrupted,
+                                                                tmp_path, signum, code):
+    out = tmp_path / "run"
+    proc = _start(clips, out)
+    _wait_for_training(out, proc)
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == code, err
+    assert f"continue with: bsp-train --resume {out}" in err
+    assert "interrupted" in err and "Traceback" not in err
+    # an incomplete run: a marker with the position, a checkpoint, no metrics.json
+    assert not (out / "metrics.json").exists()
+    marker = json.loads((out / "incomplete.json").read_text())
+    assert marker["state"] == "interrupted" and marker["signal"] == signal.Signals(signum).name
+    assert f"epoch {marker['epoch']} step {marker['step']}" in err
+    ckpt = torch.load(out / "checkpoints" / "last.ckpt", weights_only=True)
+    assert ckpt["global_step"] == marker["step"] > 0
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+    # nothing takes it for a finished run
+    from bsp_fast.training.evaluate import main as eval_main
+
+    assert eval_main([str(out)]) == 1
+    # resumed from another directory: the saved config's paths still work
+    res = subprocess.run([sys.executable, "-m", "bsp_fast", "train", "--resume", str(out),
+                          "--quiet"], env=_env(), cwd=tmp_path.parent, capture_output=True,
+                         text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert not (out / "incomplete.json").exists()
+    # bit-identical on CPU: same weights, same test metrics (tolerance 0)
+    assert _test_metrics(out) == uninterrupted.metrics
+    a = torch.load(out / "checkpoints" / "last.ckpt", weights_only=True)["state_dict"]
+    b = torch.load(uninterrupted.last_checkpoint, weights_only=True)["state_dict"]
+    assert all(torch.equal(a[k], b[k]) for k in b)
+
+
+def test_kill_9_resumes_from_the_last_periodic_checkpoint(clips, uninterrupted, tmp_path):
+    out = tmp_path / "run"
+    proc = _start(clips, out, "--checkpoint-every", "0.05s")
+    tmp = _wait_for_training(out, proc, epoch=4)
+    proc.kill()  # SIGKILL: no handler runs
+    proc.communicate(timeout=60)
+    assert not out.exists() and tmp.is_dir()
+    marker = runs_mod.read_marker(tmp)
+    assert marker["state"] == "running" and marker["pid"] == proc.pid
+    ckpt = torch.load(tmp / "checkpoints" / "last.ckpt", weights_only=True)
+    assert ckpt["global_step"] > 0
+    res = bsp_fast.train(resume=out, quiet=True)  # finds the killed run's directory
+    assert res.run_dir == out and not tmp.exists()
+    assert _test_metrics(out) == uninterrupted.metrics
+
+
+def test_mid_epoch_checkpoint_resumes_exactly(clips, uninterrupted, tmp_path, monkeypatch):
+    # a checkpoint after every batch, and the run stopped by a full disk mid-epoch
+    out = tmp_path / "run"
+    calls = {"n": 0}
+    real = lifecycle.write_bytes
+
+    def failing(path, data, **kw):
+        calls["n"] += 1
+        last = Path(path).with_name("last.ckpt")
+        if calls["n"] > 15 and last.is_file():  # the disk fills after a mid-epoch save
+            done = torch.load(last, weights_only=True)["callbacks"]["BSPLifecycle"]
+            if done["batches_done"] < 6:
+                raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        real(path, data, **kw)
+
+    monkeypatch.setattr(lifecycle, "write_bytes", failing)
+    args = [*MODEL, "--data", str(clips), "--out", str(out), "--epochs", str(EPOCHS),
+            "--batch-size", "8", "--threads", "1", "--seed", "7", "--quiet",
+            "--checkpoint-every", "0.001s", *[f"--hp={k}={v}" for k, v in HP.items()]]
+    code = train_main(args)
+    assert code == 1
+    monkeypatch.setattr(lifecycle, "write_bytes", real)
+    marker = runs_mod.read_marker(out)
+    assert marker["state"] == "failed" and "No space left on device" in marker["reason"]
+    before = torch.load(out / "checkpoints" / "last.ckpt", weights_only=True)
+    assert before["global_step"] == marker["step"] > 0  # the previous checkpoint, whole
+    assert 0 < before["callbacks"]["BSPLifecycle"]["batches_done"] < 6  # mid-epoch
+    assert train_main(["--resume", str(out), "--quiet"]) == 0
+    assert _test_metrics(out) == uninterrupted.metrics
+
+
+def test_full_disk_message(clips, tmp_path, monkeypatch, capsys):
+    out = tmp_path / "run"
+    real = lifecycle.write_bytes
+    calls = {"n": 0}
+
+    def failing(path, data, **kw):
+        calls["n"] += Path(path).name == "last.ckpt"
+        if calls["n"] == 2 and Path(path).name == "last.ckpt":  # end of epoch 2 (1-based)
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        real(path, data, **kw)
+
+    monkeypatch.setattr(lifecycle, "write_bytes", failing)
+    code = train_main([*MODEL, "--data", str(clips), "--out", str(out), "--epochs", "5",
+                       "--batch-size", "8", "--threads", "1", "--quiet",
+                       *[f"--hp={k}={v}" for k, v in HP.items()]])
+    err = capsys.readouterr().err
+    assert code == 1
+    lines = [ln for ln in err.splitlines() if ln.startswith("bsp-train:")]
+    assert len(lines) == 1, err
+    assert "last.ckpt: cannot save the checkpoint (No space left on device); the previous " \
+           "one is intact" in lines[0]
+    assert f"continue with: bsp-train --resume {out}" in lines[0]
+    assert torch.load(out / "checkpoints" / "last.ckpt", weights_only=True)["epoch"] == 0
+
+
+def test_full_disk_on_metrics_json_then_resume_tests_only(clips, tmp_path, monkeypatch,
+                                                          capsys):
+    out = tmp_path / "run"
+    real = runs_mod.write_text
+
+    def failing(path, text, **kw):
+        if Path(path).name == "metrics.json":
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        real(path, text, **kw)
+
+    monkeypatch.setattr(runs_mod, "write_text", failing)
+    base = [*MODEL, "--data", str(clips), "--epochs", "3", "--batch-size", "8", "--threads",
+            "1", "--quiet", *[f"--hp={k}={v}" for k, v in HP.items()]]
+    assert train_main(base + ["--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "metrics.json: cannot write the run's results (No space left on device)" in err
+    assert not (out / "metrics.json").exists()
+    assert runs_mod.read_marker(out)["fit_done"] == 3
+    monkeypatch.setattr(runs_mod, "write_text", real)
+    assert train_main(["--resume", str(out), "--quiet"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["epochs"] == 3  # no epoch trained again
+    assert train_main(base + ["--out", str(tmp_path / "whole")]) == 0
+    assert _test_metrics(tmp_path / "whole") == metrics["test"]
+
+
+def test_read_only_out_is_one_line(clips, tmp_path, capsys):
+    ro = Path("/proc/bsp_fast_cannot_write_here")
+    code = train_main([*MODEL, "--data", str(clips), "--out", str(ro), "--epochs", "1",
+                       "--quiet", *[f"--hp={k}={v}" for k, v in HP.items()]])
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err
+    assert f"--out {ro}: cannot write the run directory there" in err
+
+
+@pytest.fixture(scope="module")
+def finished(clips, tmp_path_factory):
+    out = tmp_path_factory.mktemp("finished") / "run"
+    return bsp_fast.train(*MODEL, data=clips, out=out, **_opts(epochs=1))
+
+
+@pytest.mark.parametrize("damage", ["truncated", "pickled", "foreign"])
+def test_resume_refuses_broken_checkpoints(finished, clips, tmp_path, damage, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(finished.run_dir, run)
+    last = run / "checkpoints" / "last.ckpt"
+    if damage == "truncated":
+        data = last.read_bytes()
+        last.write_bytes(data[:len(data) // 2])
+        why = "not a readable checkpoint"
+    elif damage == "pickled":
+        torch.save({"payload": Path("x")}, last)  # arbitrary Python objects
+        why = "not a readable checkpoint"
+    else:
+        other = bsp_fast.train("classification", "lstm", data=clips, out=tmp_path / "cls",
+                               epochs=1, batch_size=8, quiet=True,
+                               hp={"hidden_size": 8, "num_layers": 1})
+        shutil.copy(other.last_checkpoint, last)
+        why = "is a 'classification' checkpoint of model 'lstm', but its run is 'lifting'"
+    code = train_main(["--resume", str(run)])
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err
+    assert str(last) in err and why in err
+
+
+def test_eval_refuses_a_checkpoint_of_another_task(finished, clips, tmp_path, capsys):
+    from bsp_fast.training.evaluate import main as eval_main
+
+    run = tmp_path / "run"
+    shutil.copytree(finished.run_dir, run)
+    other = bsp_fast.train("classification", "lstm", data=clips, out=tmp_path / "cls",
+                           epochs=1, batch_size=8, quiet=True,
+                           hp={"hidden_size": 8, "num_layers": 1})
+    shutil.copy(other.best_checkpoint, run / "checkpoints" / "best.ckpt")
+    assert eval_main([str(run)]) == 1
+    err = capsys.readouterr().err
+    assert "is a 'classification' checkpoint of model 'lstm'" in err
+    assert "is a 'lifting' run of model 'baseline_3d'" in err
+
+
+def test_config_yaml_holds_absolute_paths(finished):
+    import yaml
+
+    doc = yaml.safe_load((finished.run_dir / "config.yaml").read_text())
+    assert doc["resolved"]["data"] == str(Path(doc["data"]).absolute())
+    assert Path(doc["resolved"]["out"]).is_absolute()
+
+
+def test_checkpoint_every_is_checked_before_any_work(clips, tmp_path, capsys):
+    assert train_main([*MODEL, "--data", str(clips), "--out", str(tmp_path / "r"),
+                       "--checkpoint-every", "soon"]) == 2
+    assert "checkpoint_every expects a duration" in capsys.readouterr().err
+    assert lifecycle.parse_duration("10m") == 600 and lifecycle.parse_duration("0") == 0
+    assert lifecycle.parse_duration("1.5h") == 5400 and lifecycle.parse_duration("90s") == 90
+
+
+def test_reproduce_continues_an_interrupted_row(tmp_path, monkeypatch):
+    from bsp_fast.training import seeds
+
+    run = tmp_path / "stopped"
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "checkpoints" / "last.ckpt").write_bytes(b"x")
+    (run / "config.yaml").write_text("task: lifting\nmodel: lstm\n")
+    runs_mod.write_marker(run, state="interrupted", epoch=2, step=10)
+    assert runs_mod.resumable(run) == run
+    assert runs_mod.resumable(tmp_path / "finished-or-absent") is None
+    cmd = seeds._command(tmp_path / "c.yaml", True, run)
+    assert cmd[-4:] == ["train", "--resume", str(run), "--quiet"]
+    calls = []
+    monkeypatch.setattr("bsp_fast.training.train.train", lambda **kw: calls.append(kw))
+    seeds._run([("row seed 1", tmp_path / "c.yaml", run)], 1, True, lambda *_: None)
+    assert calls == [{"resume": str(run), "quiet": True}]
