@@ -194,8 +194,11 @@ def test_predict_writes_denormalised_outputs(runs, data, tmp_path):
         np.testing.assert_array_equal(f["clip_id"][()], src["test/meta/clip_id"][()][rows])
         target = src["test/targets/absolute_pose_loc"][()][rows]
         np.testing.assert_allclose(f["target_metres"][()], target, atol=1e-6)
+        # the outputs the run's test metrics scored (float32 sums vs float64: rel ~1e-9)
         err = np.linalg.norm(f["metres_aligned"][()] - target, axis=-1).mean() * 1000
-        assert err == pytest.approx(runs["lifting"].metrics["mpjpe_mm"], rel=1e-4)
+        assert err == pytest.approx(runs["lifting"].metrics["mpjpe_mm"], rel=1e-6)
+        pa = bsp_fast.metrics.pa_mpjpe(f["metres_aligned"][()], target) * 1000
+        assert pa == pytest.approx(runs["lifting"].metrics["pa_mpjpe_mm"], rel=1e-6)
         assert f.attrs["task"] == "lifting" and f.attrs["units"] == "metres"
     out = tmp_path / "ae.h5"
     assert predict_main([str(runs["autoencoder"].run_dir), "--out", str(out), "--quiet"]) == 0
@@ -204,11 +207,49 @@ def test_predict_writes_denormalised_outputs(runs, data, tmp_path):
         clean = src["test/projection_2d"][()][f["row"][()]]
         np.testing.assert_allclose(f["target_pixels"][()], clean, atol=2e-3)
         assert f["pixels"].shape == clean.shape
+        # clean inputs: the input's normalisation is the target's
+        np.testing.assert_allclose(f["pixels"][()], f["pixels_scored"][()], atol=1e-3)
+        pck = bsp_fast.metrics.pck(f["pixels_scored"][()], f["target_pixels"][()], alpha=0.05)
+        assert pck == pytest.approx(runs["autoencoder"].metrics["pck_0.05"], rel=1e-9)
     out = tmp_path / "cls.h5"
     assert predict_main([str(runs["classification"].run_dir), "--out", str(out), "--quiet"]) == 0
     with h5py.File(out) as f:
         acc = np.mean(f["prediction"][()] == f["label"][()])
         assert acc == pytest.approx(runs["classification"].metrics["accuracy"])
+        f1 = bsp_fast.metrics.f1_score(f["prediction"][()], f["label"][()])
+        assert f1 == pytest.approx(runs["classification"].metrics["f1"])
+
+
+def test_predict_runs_in_the_precision_and_noise_bsp_eval_scores_in(runs, tmp_path,
+                                                                     monkeypatch):
+    """bsp-predict's outputs are the ones bsp-eval scores: on a CPU with native bf16,
+    ``--precision auto`` is bf16-mixed for baseline_3d and simple_transformer, and the
+    predictions are made in bf16 too (they were float32: MPJPE 891.586 mm against the
+    scored 891.425 mm); a --noise override deforms the same clips the same way."""
+    from bsp_fast.training import precision
+    from bsp_fast.training.predict import predict
+
+    monkeypatch.setattr(precision, "native_bf16", lambda accelerator: True)
+    run = runs["lifting"].run_dir
+    scored = bsp_fast.evaluate(run, quiet=True).metrics
+    res = predict(run, tmp_path / "lifting.h5")
+    with h5py.File(res.path) as f:
+        pred, target = f["metres_aligned"][()], f["target_metres"][()]
+    err = np.linalg.norm(pred - target, axis=-1).mean() * 1000
+    assert err == pytest.approx(scored["mpjpe_mm"], rel=1e-6)
+    monkeypatch.setattr(precision, "native_bf16", lambda accelerator: False)
+    f32 = predict(run, tmp_path / "lifting32.h5")
+    with h5py.File(f32.path) as f:
+        assert np.abs(f["metres_aligned"][()] - pred).max() > 1e-4  # bf16 above was bf16
+    run = runs["autoencoder"].run_dir
+    scored = bsp_fast.evaluate(run, noise=3.0, quiet=True).metrics
+    res = predict(run, tmp_path / "ae.h5", noise=3.0)
+    with h5py.File(res.path) as f:
+        got, want = f["pixels_scored"][()], f["target_pixels"][()]
+        assert np.abs(f["pixels"][()] - got).max() > 1e-3  # noisy input, other normalisation
+    for key, alpha, norm in (("pck_0.05", 0.05, "bbox"), ("pckhn_0.1", 0.1, "hips_neck")):
+        value = bsp_fast.metrics.pck(got, want, alpha=alpha, norm=norm)
+        assert value == pytest.approx(scored[key], rel=1e-9), key
 
 
 def test_lifting_scores_with_the_reference_skeleton(data):

@@ -13,7 +13,7 @@ from pathlib import Path
 from . import config as C
 from .runs import RunError, read_run, resolve_checkpoint, write_json
 
-__all__ = ["evaluate", "main", "EvalResult", "load_run"]
+__all__ = ["evaluate", "main", "EvalResult", "load_run", "prepare_scoring"]
 
 SPLIT_STAGES = {"test": "test", "val": "validate"}
 
@@ -70,6 +70,24 @@ def load_run(run, which: str = "best", data=None, **overrides):
     return module, cfg, ckpt, h5
 
 
+def prepare_scoring(cfg: dict, module) -> str:
+    """Sets the run's ``threads`` (``torch.set_num_threads``, when given) and returns the
+    Trainer precision ``bsp-eval`` scores it in and ``bsp-predict`` predicts in (so the
+    predictions are the outputs that were scored): the run's ``precision`` (``auto``
+    resolved for its model and ``cfg["accelerator"]``), float32 where bf16 is not native
+    (e.g. a bf16 GPU run on a CPU without bf16 instructions)."""
+    from .precision import native_bf16, resolve_precision
+
+    if cfg["threads"]:
+        import torch
+
+        torch.set_num_threads(cfg["threads"])
+    precision = resolve_precision(cfg["precision"], cfg["accelerator"], module.net)
+    if precision.startswith("bf16") and not native_bf16(cfg["accelerator"]):
+        precision = "32"
+    return precision
+
+
 def evaluate(run, split: str = "test", data=None, *, which: str = "best",
              batch_size: int | None = None, workers: int | None = None,
              accelerator: str | None = None, noise: float | None = None, mjp=None,
@@ -80,20 +98,14 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
     ``metrics.json``."""
     if split not in SPLIT_STAGES:
         raise ValueError(f"split must be one of {list(SPLIT_STAGES)}, got {split!r}")
-    from .train import make_datamodule, make_trainer, native_bf16, prepare_data, resolve_precision
+    from .train import make_datamodule, make_trainer, prepare_data
 
     module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size, workers=workers,
                                      accelerator=accelerator, noise=noise, mjp=mjp,
                                      limit_batches=limit_batches, quiet=quiet)
-    if cfg["threads"]:
-        import torch
-
-        torch.set_num_threads(cfg["threads"])
+    precision = prepare_scoring(cfg, module)
     dm = make_datamodule(cfg, h5)
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
-    precision = resolve_precision(cfg["precision"], cfg["accelerator"], module.net)
-    if precision.startswith("bf16") and not native_bf16(cfg["accelerator"]):
-        precision = "32"  # e.g. a bf16 GPU run evaluated on a CPU without bf16 instructions
     trainer = make_trainer(cfg, None, precision, fit=False)
     if split == "test":
         trainer.test(module, datamodule=dm, verbose=False)

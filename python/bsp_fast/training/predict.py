@@ -11,7 +11,8 @@ Written datasets (N clips, L' = the frames the model predicts, see ``frame_start
   ``trainer.predict`` through a ``BasePredictionWriter``:
 * classification: ``logits``, ``probability`` (of crossing), ``prediction`` (0/1);
 * autoencoder: ``pixels (N, L', 26, 2)`` de-normalised with the *input's* hips/neck
-  normalisation (no ground truth used), ``normalised`` (raw output), ``input_pixels``
+  normalisation (no ground truth used), ``pixels_scored`` (with the clean target's, as
+  scored), ``normalised`` (raw output), ``input_pixels``
   (the deformed input, missing joints (0, 0)), ``target_pixels`` (clean 2D);
 * lifting: ``metres (N, L', 26, 3)`` hips at the origin, scaled by the reference skeleton's
   hips-neck length of the clip's (age, gender); ``metres_aligned`` (hips on the target's
@@ -98,21 +99,23 @@ def _progress_bar():
 
 def predict(run, out, data=None, *, split: str = "test", which: str = "best",
             batch_size: int | None = None, workers: int | None = None,
-            accelerator: str = "auto", noise: float | None = None, mjp=None,
+            accelerator: str | None = None, noise: float | None = None, mjp=None,
             force: bool = False, progress: bool = False) -> PredictResult:
     """Writes the predictions of run directory or checkpoint ``run`` for ``split`` of its
     data (or ``data``) to the HDF5 file ``out`` (temporary name, renamed when complete;
-    an existing file needs ``force``)."""
+    an existing file needs ``force``). The model runs as ``bsp-eval`` scores it (the run's
+    accelerator unless given, precision, threads, batch size and so evaluation noise), so
+    the predictions are the outputs that were scored."""
     import warnings
 
     import torch
 
-    from .evaluate import SPLIT_STAGES, load_run
+    from .evaluate import SPLIT_STAGES, load_run, prepare_scoring
     from .train import make_datamodule, make_trainer, prepare_data
 
     if split not in SPLIT_STAGES:
         raise ValueError(f"split must be one of {list(SPLIT_STAGES)}, got {split!r}")
-    if accelerator not in C.ACCELERATORS:
+    if accelerator is not None and accelerator not in C.ACCELERATORS:
         raise ValueError(f"accelerator must be one of {list(C.ACCELERATORS)}, got "
                          f"{accelerator!r}")
     out = Path(out)
@@ -121,10 +124,14 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
                        "file name, e.g. predictions.h5)", code=2)
     if out.exists() and not force:
         raise RunError(f"{out} exists; pass --force to overwrite it", code=3)
-    if accelerator == "gpu" and not torch.cuda.is_available():
-        raise C.ConfigError("--accelerator gpu: no CUDA device available")
     module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size,
-                                     workers=workers, noise=noise, mjp=mjp)
+                                     workers=workers, accelerator=accelerator, noise=noise,
+                                     mjp=mjp)
+    if cfg["accelerator"] == "gpu" and not torch.cuda.is_available():
+        raise C.ConfigError("--accelerator gpu: no CUDA device available" if accelerator else
+                            f"{ckpt}: the run used --accelerator gpu and no CUDA device is "
+                            "available here; pass --accelerator cpu")
+    precision = prepare_scoring(cfg, module)
     dm = make_datamodule(cfg, h5)
     # never overwrite what predictions are made from, through links too
     refuse_unsafe_output(out, force=True, inputs=[ckpt, h5, dm.h5_path, cfg.get("data")],
@@ -140,9 +147,9 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
              "hparams_json": json.dumps(module.hparams["hparams"], default=str),
              "units": module.spec.prediction_units}
     writer = _writer(out, force, attrs)
-    # float32 like training's default; the whole split, whatever the run's --limit-batches
-    trainer = make_trainer(dict(cfg, accelerator=accelerator, quiet=not progress,
-                                limit_batches=0), None, "32", fit=False,
+    # the precision bsp-eval scores in; the whole split, whatever the run's --limit-batches
+    trainer = make_trainer(dict(cfg, quiet=not progress, limit_batches=0), None, precision,
+                           fit=False,
                            callbacks=[writer] + ([_progress_bar()] if progress else []))
     # the writer needs no sampler indices (the clips carry their row)
     warnings.filterwarnings("ignore", message=r".*infer the batch indices.*")
@@ -169,7 +176,8 @@ def main(argv=None) -> int:
                    help="checkpoint of a run directory")
     p.add_argument("--batch-size", type=int, default=None, help="default: the run's")
     p.add_argument("--workers", type=int, default=None, help="DataLoader worker processes")
-    p.add_argument("--accelerator", default="auto", choices=C.ACCELERATORS)
+    p.add_argument("--accelerator", default=None, choices=C.ACCELERATORS,
+                   help="where to run (default: the run's)")
     p.add_argument("--noise", type=float, default=None, help="override the run's input noise")
     p.add_argument("--mjp", default=None, help="override the run's missing-joint probability")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")

@@ -45,7 +45,8 @@ class Autoencoder(Task):
         scores["mjr"].update(missing.mean(), missing.numel())
 
     def predictions(self, output, batch, model) -> dict:
-        """``pixels``: de-normalised with the *input's* normalisation (no ground truth)."""
+        """``pixels``: de-normalised with the *input's* normalisation (no ground truth);
+        ``pixels_scored``: with the clean target's, as scored (equal without noise/MJP)."""
         import torch
 
         sl = self.scored_frames(model, batch["targets"].shape[1])
@@ -53,7 +54,8 @@ class Autoencoder(Task):
         vis = batch["visible"][:, sl, :, None]
         tscale = batch["target_scale"][:, sl, None, None]
         tshift = batch["target_shift"][:, sl, None, :]
-        return {"pixels": output * scale + shift, "normalised": output,
+        return {"pixels": output * scale + shift, "pixels_scored": output * tscale + tshift,
+                "normalised": output,
                 "input_pixels": torch.where(vis, batch["inputs"][:, sl] * scale + shift, 0.0),
                 "target_pixels": batch["targets"][:, sl] * tscale + tshift,
                 "frames": batch["meta"]["frames"][:, sl]}
