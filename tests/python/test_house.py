@@ -21,3 +21,18 @@ def test_the_tree_keeps_the_house_rules():
     p = subprocess.run([sys.executable, str(ROOT / "tools" / "house_check.py")],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stdout + p.stderr
+
+
+def test_architecture_page_names_only_paths_that_exist(tmp_path):
+    tool = [sys.executable, str(ROOT / "tools" / "check_doc_paths.py")]
+    p = subprocess.run(tool + ["docs/architecture.md"], capture_output=True, text=True,
+                       timeout=120, cwd=ROOT)
+    assert p.returncode == 0, p.stdout + p.stderr
+    page = ROOT / "docs" / "_check_doc_paths_probe.md"  # the checker does find a stale path
+    page.write_text("see `python/bsp_fast/no_such_module.py`\n")
+    try:
+        p = subprocess.run(tool + ["docs/_check_doc_paths_probe.md"], capture_output=True,
+                           text=True, timeout=120, cwd=ROOT)
+    finally:
+        page.unlink()
+    assert p.returncode == 1 and "no_such_module.py" in p.stdout
