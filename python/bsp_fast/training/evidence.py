@@ -202,13 +202,9 @@ def _md(header, rows) -> str:
 def format_table(tab: dict, res: dict, findings: list) -> str:
     """Markdown: cells ``mean ± std [95 % interval]``, the report's values, the trivial
     baseline, epochs per seed; then the findings with their difference, interval, mark."""
-    metrics = list(tab["metrics"])
-    reported = [m for m in metrics if any(m in (r.get("report") or {}) for r in tab["rows"])]
-    settings = tab["task"] in ("classification", "autoencoder")
-    header = ["row", "model"] + (["σ (px)", "MJP"] if settings else [])
-    header += [tab["metrics"][m]["label"] for m in metrics]
-    header += [f"report {tab['metrics'][m]['label']}" for m in reported]
-    header += [f"trivial {tab['metrics'][metrics[0]]['label']}", "epochs (best/run) per seed"]
+    from .table_files import settings_cells, table_header
+
+    header, metrics, reported, settings = table_header(tab, "epochs (best/run) per seed")
     rows = []
     for row in tab["rows"]:
         r = res["results"].get(row["name"])
@@ -216,8 +212,7 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
             continue
         cells = [row["name"], row.get("label", row["name"])]
         if settings:
-            cells += [f"{r.get('noise') or 0:g}", "per joint" if isinstance(r.get("mjp"), list)
-                      else f"{r.get('mjp') or 0:g}"]
+            cells += settings_cells(r)
         cells += [_cell(tab, m, r) for m in metrics]
         cells += [_num(tab, m, (row.get("report") or {}).get(m)) for m in reported]
         cells.append(_num(tab, metrics[0], r["initial"].get(metrics[0])))

@@ -21,8 +21,7 @@ from ..atomic import write_text
 from .runs import RunError, read_run, resumable
 from .findings import NA, NO, YES, evaluate_findings, format_value
 from .table_files import (BUDGETS, KINDS, RELATIONS, TABLES, experiments_dir, experiments_dirs,
-                          load_table, row_options)
-from .tasks import get_task
+                          load_table, row_options, settings_cells, table_header, wanted_rows)
 from .tasks.classification import constant_f1
 
 # (table files and findings live in .table_files and .findings; their names stay here)
@@ -49,17 +48,7 @@ def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrid
     tab = table if isinstance(table, dict) else load_table(table)
     if budget not in BUDGETS:
         raise ValueError(f"budget must be one of {list(BUDGETS)}, got {budget!r}")
-    names = [r["name"] for r in tab["rows"]]
-    wanted = list(names) if not rows else list(rows)
-    bad = [r for r in wanted if r not in names]
-    if bad:
-        raise ValueError(f"unknown row(s) {bad} of table {tab['table']!r}; allowed: "
-                         + ", ".join(names))
-    by_name = {r["name"]: r for r in tab["rows"]}
-    for name in list(wanted):  # rows read from another row's run need that run
-        src = by_name[name].get("initial_of")
-        if src and src not in wanted:
-            wanted.append(src)
+    wanted = wanted_rows(tab, rows)
     base = Path(out) / f"{tab['table']}-{budget}"
     plan = []
     for row in tab["rows"]:
@@ -116,13 +105,7 @@ def _md(header, rows) -> str:
 
 def format_report(tab: dict, res: dict) -> str:
     """Markdown: our table with the report's values beside it, then the findings."""
-    metrics = list(tab["metrics"])
-    reported = [m for m in metrics if any(m in (r.get("report") or {}) for r in tab["rows"])]
-    settings = get_task(tab["task"]).deformed_inputs
-    header = ["row", "model"] + (["σ (px)", "MJP"] if settings else [])
-    header += [tab["metrics"][m]["label"] for m in metrics]
-    header += [f"report {tab['metrics'][m]['label']}" for m in reported]
-    header += [f"trivial {tab['metrics'][metrics[0]]['label']}", "epochs (best/run)"]
+    header, metrics, reported, settings = table_header(tab, "epochs (best/run)")
     rows = []
     for row in tab["rows"]:
         r = res["results"].get(row["name"])
@@ -130,8 +113,7 @@ def format_report(tab: dict, res: dict) -> str:
             continue
         cells = [row["name"], row.get("label", row["name"])]
         if settings:
-            cells += [f"{r['noise'] or 0:g}", f"{r['mjp'] or 0:g}"
-                      if not isinstance(r["mjp"], list) else "per joint"]
+            cells += settings_cells(r)
         cells += [format_value(tab, m, r["metrics"].get(m)) for m in metrics]
         cells += [format_value(tab, m, (row.get("report") or {}).get(m)) for m in reported]
         cells.append(format_value(tab, metrics[0], r["initial"].get(metrics[0])))

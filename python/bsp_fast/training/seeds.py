@@ -18,7 +18,8 @@ from . import config as C
 from ..atomic import publish, temp_path, write_text
 from ..defaults import SEED
 from .breakdown import FILE as BREAKDOWN
-from .table_files import BUDGETS, RULE_KEYS, check_budget_rule, load_table, row_options
+from .table_files import BUDGETS, RULE_KEYS, check_budget_rule, load_table, row_options, \
+    wanted_rows
 from .runs import RunError, read_run, resumable
 
 __all__ = ["RULE_KEYS", "check_budget_rule", "seed_list", "reproduce_seeds", "add_options",
@@ -176,15 +177,7 @@ def reproduce_seeds(table, data, budget: str = "quick", out="runs", *, seeds: in
     if split_seeds and Path(data).suffix in (".h5", ".hdf5"):
         raise ValueError("--split-seeds needs a dataset directory: an HDF5 file holds one "
                          "split")
-    names = [r["name"] for r in tab["rows"]]
-    wanted = list(names) if not rows else list(rows)
-    bad = [r for r in wanted if r not in names]
-    if bad:
-        raise ValueError(f"unknown row(s) {bad} of table {tab['table']!r}; allowed: "
-                         + ", ".join(names))
-    by_name = {r["name"]: r for r in tab["rows"]}
-    wanted += [by_name[n]["initial_of"] for n in wanted
-               if by_name[n].get("initial_of") and by_name[n]["initial_of"] not in wanted]
+    wanted = wanted_rows(tab, rows)
     base = Path(out) / f"{tab['table']}-{budget}"
     plan = _plan(tab, data, budget, base, wanted, seed_values, split_seeds, overrides,
                  1 if jobs > 1 else None)

@@ -14,7 +14,7 @@ from pathlib import Path
 from . import config as C
 from .tasks import get_task
 
-__all__ = ["TABLES", "BUDGETS", "KINDS", "RELATIONS", "RULE_KEYS", "experiments_dirs",
+__all__ = ["wanted_rows", "table_header", "settings_cells", "TABLES", "BUDGETS", "KINDS", "RELATIONS", "RULE_KEYS", "experiments_dirs",
            "experiments_dir", "load_table", "row_options", "check_budget_rule", "rows_of"]
 
 TABLES = ("lifting", "classification", "autoencoder", "pose_estimation")
@@ -139,3 +139,40 @@ def row_options(table: dict, row: dict, budget: str, data, run_dir, overrides=No
     opts.update(overrides or {})
     opts.update(data=str(data), out=str(run_dir))
     return C.normalise(opts, f"{table['table']} row {row['name']!r}")
+
+
+def wanted_rows(tab: dict, rows=None) -> list:
+    """The names of the rows to run: all, or ``rows`` (ValueError naming unknown ones),
+    plus every row whose run another wanted row reads (``initial_of``)."""
+    names = [r["name"] for r in tab["rows"]]
+    wanted = list(names) if not rows else list(rows)
+    bad = [r for r in wanted if r not in names]
+    if bad:
+        raise ValueError(f"unknown row(s) {bad} of table {tab['table']!r}; allowed: "
+                         + ", ".join(names))
+    by_name = {r["name"]: r for r in tab["rows"]}
+    for name in list(wanted):
+        src = by_name[name].get("initial_of")
+        if src and src not in wanted:
+            wanted.append(src)
+    return wanted
+
+
+def table_header(tab: dict, epochs_label: str) -> tuple:
+    """``(header, metrics, reported, settings)`` of a results table: row, model, the
+    deformation settings (2D-input tasks), our metrics, the report's, the trivial
+    baseline's first metric and ``epochs_label``."""
+    metrics = list(tab["metrics"])
+    reported = [m for m in metrics if any(m in (r.get("report") or {}) for r in tab["rows"])]
+    settings = get_task(tab["task"]).deformed_inputs
+    header = ["row", "model"] + (["σ (px)", "MJP"] if settings else [])
+    header += [tab["metrics"][m]["label"] for m in metrics]
+    header += [f"report {tab['metrics'][m]['label']}" for m in reported]
+    header += [f"trivial {tab['metrics'][metrics[0]]['label']}", epochs_label]
+    return header, metrics, reported, settings
+
+
+def settings_cells(r: dict) -> list:
+    """The σ and MJP cells of a row's result (``per joint`` for a per-joint MJP)."""
+    mjp = r.get("mjp")
+    return [f"{r.get('noise') or 0:g}", "per joint" if isinstance(mjp, list) else f"{mjp or 0:g}"]
