@@ -359,8 +359,9 @@ def parser(prog: str = "bsp-train", description: str | None = None, epilog: str 
     ``--print-config`` and one option per table entry, typed by the entry's converter (its
     :class:`ConfigError` is the parser's message). Nothing has a parser default: read the
     options given with :func:`parse_command_line`."""
-    from jsonargparse import ArgumentParser
+    from .._extras import require
 
+    ArgumentParser = require("jsonargparse", prog).ArgumentParser
     S = argparse.SUPPRESS
     p = ArgumentParser(prog=prog, description=description, epilog=epilog,
                        formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -414,7 +414,11 @@ def build_parser():
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
+    try:
+        parser = build_parser()
+    except ImportError as exc:  # jsonargparse, of the 'torch' extra
+        print(f"bsp-train: {exc}", file=sys.stderr)
+        return 1
     try:
         cli, config_path, print_config = C.parse_command_line(parser, argv)
         if print_config:
