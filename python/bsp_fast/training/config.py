@@ -5,8 +5,8 @@ the resolved ``config.yaml`` every run writes back (:func:`dump`).
 
 Precedence: built-in defaults < the saved config of a ``--resume``d run < ``--config``
 YAML < options given on the command line (or as keywords), whatever their order on the
-line (``training.train.resolve_config``; docs/design.md says why ``--config`` is not
-jsonargparse's ``ActionConfigFile``).
+line (:func:`resolve_config`; docs/design.md says why ``--config`` is not jsonargparse's
+``ActionConfigFile``).
 
 Adding an option is one entry in ``OPTIONS``: ``_o(name, kind, default, help, group,
 ...)``, where ``kind`` names a converter of ``KINDS`` or is a function ``value -> value``
@@ -23,8 +23,8 @@ from ..defaults import SEED
 from .tasks import TASKS, get_task  # the task registry (no torch)
 
 __all__ = ["OPTIONS", "BY_NAME", "KINDS", "ConfigError", "defaults", "parser",
-           "parse_command_line", "read_yaml", "normalise", "validate", "parse_hp", "dump",
-           "write_yaml"]
+           "parse_command_line", "resolve_config", "read_yaml", "normalise", "validate",
+           "parse_hp", "dump", "write_yaml"]
 
 ACCELERATORS = ("auto", "cpu", "gpu")
 STRATEGIES = ("auto", "ddp", "ddp_spawn", "ddp_find_unused_parameters_true")
@@ -42,17 +42,15 @@ class ConfigError(ValueError, argparse.ArgumentTypeError):
 @dataclass(frozen=True)
 class Option:
     name: str
-    kind: object       # a KINDS name (int, float, str, path, flag, bool, mjp, hp, devices)
-    default: object    # or a function value -> value
+    #: a KINDS name (int, float, str, path, flag, bool, mjp, hp, devices) or a function
+    #: ``value -> value`` raising ConfigError or ValueError
+    kind: object
+    default: object
     help: str
     group: str
     choices: tuple = ()
     minimum: float | None = None
     metavar: str | None = None
-
-    @property
-    def flag(self) -> str:
-        return "--" + self.name.replace("_", "-")
 
     def convert(self, value):
         """``value`` (a command-line string or a YAML/Python value) as this option's type;
@@ -62,11 +60,12 @@ class Option:
                 raise ConfigError(f"{self.name} must be true or false, got null")
             return None
         try:
-            value = (KINDS.get(self.kind) if isinstance(self.kind, str) else self.kind)(value)
+            value = (KINDS[self.kind] if isinstance(self.kind, str) else self.kind)(value)
         except ConfigError:
             raise
         except (TypeError, ValueError):
-            what = {"int": "an integer", "float": "a finite number"}.get(self.kind, "a string")
+            what = {"int": "an integer", "float": "a finite number", "str": "a string",
+                    "path": "a string"}.get(self.kind, "a valid value")
             raise ConfigError(f"{self.name} expects {what}, got {value!r}") from None
         if self.choices and value not in self.choices:
             raise ConfigError(f"{self.name} must be one of {list(self.choices)}, got {value!r}")
@@ -75,8 +74,7 @@ class Option:
         return value
 
 
-def _o(name, kind, default, help, group, **kw):
-    return Option(name, kind, default, help, group, **kw)
+_o = Option  # _o(name, kind, default, help, group, choices=, minimum=, metavar=)
 
 
 OPTIONS: tuple = (
@@ -309,6 +307,44 @@ def validate(cfg: dict) -> dict:
     return cfg
 
 
+def resolve_config(cli: dict, config_path=None) -> tuple:
+    """defaults < resumed run's config < --config YAML < ``cli`` (the options given, e.g.
+    by :func:`parse_command_line`) -> ``(cfg, resume)``, ``resume`` = ``{"ckpt",
+    "run_dir"}`` or None."""
+    from .runs import default_run_dir, read_run, resolve_checkpoint
+
+    from_yaml = read_yaml(config_path) if config_path else {}
+    cfg = defaults()
+    resume = None
+    target = cli.get("resume", from_yaml.get("resume"))
+    if target:
+        ckpt, run_dir = resolve_checkpoint(target, "last")
+        if run_dir is not None:
+            saved = read_run(run_dir)["config"]
+        else:
+            from .tasks import checkpoint_info
+
+            saved = checkpoint_info(ckpt).get("config") or {}
+        known = {k: v for k, v in saved.items() if k in BY_NAME
+                 and k not in ("resume", "force", "out", "quiet")}
+        cfg.update(normalise(known, f"{target} (saved config)"))
+        resume = {"ckpt": Path(ckpt), "run_dir": run_dir}
+        for key in ("task", "model"):
+            want = cli.get(key, from_yaml.get(key))
+            if want is not None and want != saved.get(key):
+                raise ConfigError(f"--resume {target} is a {saved.get('task')!r} run of "
+                                  f"model {saved.get('model')!r}; it cannot continue as "
+                                  f"{key} {want!r}")
+        if cli.get("out") is None and from_yaml.get("out") is None and run_dir is not None:
+            cfg["out"] = str(run_dir)
+    cfg.update(from_yaml)
+    cfg.update(cli)
+    cfg = validate(cfg)
+    if cfg["out"] is None:
+        cfg["out"] = str(default_run_dir(cfg["task"], cfg["model"]))
+    return cfg, resume
+
+
 # ---------------------------------------------------------------------- YAML
 def read_yaml(path) -> dict:
     """A run config (``--config``): a mapping of option names, safe YAML only; a run's
@@ -390,7 +426,7 @@ def parser(prog: str = "bsp-train", description: str | None = None, epilog: str 
                       ("|".join(o.choices) if o.choices else o.name.upper()))
             if o.kind == "hp":
                 kw.update(action=_MergeHp)
-        groups[o.group].add_argument(o.flag, **kw)
+        groups[o.group].add_argument("--" + o.name.replace("_", "-"), **kw)
     return p
 
 

@@ -13,8 +13,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import config as C
-from .runs import ENV_TMP, RunDirectory, RunError, default_run_dir, read_run, \
-    refuse_unsafe_output, resolve_checkpoint, write_json
+from .config import resolve_config  # defaults < resumed run < --config < options
+from .runs import ENV_TMP, RunDirectory, RunError, read_run, refuse_unsafe_output, \
+    write_json
 from .precision import check_precision, native_bf16, resolve_precision
 from .tasks import TASKS, get_task
 
@@ -36,42 +37,6 @@ class TrainResult:
     epochs: int
     config: dict
     seconds: dict = field(default_factory=dict)
-
-
-# ---------------------------------------------------------------------- config
-def resolve_config(cli: dict, config_path=None) -> tuple:
-    """defaults < resumed run's config < --config YAML < explicit options ->
-    ``(cfg, resume)`` with ``resume`` = ``{"ckpt", "run_dir"}`` or None."""
-    from_yaml = C.read_yaml(config_path) if config_path else {}
-    cfg = C.defaults()
-    resume = None
-    target = cli.get("resume", from_yaml.get("resume"))
-    if target:
-        ckpt, run_dir = resolve_checkpoint(target, "last")
-        if run_dir is not None:
-            saved = read_run(run_dir)["config"]
-        else:
-            from .tasks import checkpoint_info
-
-            saved = checkpoint_info(ckpt).get("config") or {}
-        known = {k: v for k, v in saved.items() if k in C.BY_NAME
-                 and k not in ("resume", "force", "out", "quiet")}
-        cfg.update(C.normalise(known, f"{target} (saved config)"))
-        resume = {"ckpt": Path(ckpt), "run_dir": run_dir}
-        for key in ("task", "model"):
-            want = cli.get(key, from_yaml.get(key))
-            if want is not None and want != saved.get(key):
-                raise C.ConfigError(f"--resume {target} is a {saved.get('task')!r} run of "
-                                    f"model {saved.get('model')!r}; it cannot continue as "
-                                    f"{key} {want!r}")
-        if cli.get("out") is None and from_yaml.get("out") is None and run_dir is not None:
-            cfg["out"] = str(run_dir)
-    cfg.update(from_yaml)
-    cfg.update(cli)
-    cfg = C.validate(cfg)
-    if cfg["out"] is None:
-        cfg["out"] = str(default_run_dir(cfg["task"], cfg["model"]))
-    return cfg, resume
 
 
 def _rank() -> int:  # Lightning's: from the launcher's environment, then the trainer's
