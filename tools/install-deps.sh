@@ -17,7 +17,7 @@ PIP_PACKAGES=(
   "opencv-python-headless>=4.8" "matplotlib>=3.5"
   # Pinned exactly: this version's CPU build is on the machine; a looser pin pulls a
   # multi-GB CUDA build.
-  "torch==2.13.0" "lightning>=2.2"
+  "torch==2.13.0" "lightning>=2.2" "jsonargparse>=4.39,<5"
   # the 'distributed' extra (bsp-convert/bsp-synth --scheduler dask; its tests), pinned
   "dask[distributed]==2026.8.0" "distributed==2026.8.0"
 )
@@ -49,7 +49,8 @@ need = {"numpy": "1.22", "h5py": "3.8", "PyYAML": "6", "tqdm": "4.60", "pandas":
         "pytest": "7", "av": "12", "pillow": "10", "pyarrow": "14",
         "scikit-build-core": "0.10", "pybind11": "2.12", "opencv-python-headless": "4.8",
         "matplotlib": "3.5",
-        "torch": "2.13", "lightning": "2.2", "dask": "2026.8", "distributed": "2026.8"}
+        "torch": "2.13", "lightning": "2.2", "jsonargparse": "4.39", "dask": "2026.8",
+        "distributed": "2026.8"}
 def v(s): return tuple(int(x) for x in s.split(".")[:2] if x.isdigit())
 for name, low in need.items():
     if v(md.version(name)) < v(low): sys.exit(1)

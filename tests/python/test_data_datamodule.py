@@ -44,6 +44,17 @@ def test_option_checks(h5file, tmp_path):
         BSPDataModule(h5_path=tmp_path / "missing.h5").prepare_data()
 
 
+def test_messages_only_on_lightnings_rank_zero(h5file, monkeypatch, capsys):
+    from lightning.pytorch.utilities import rank_zero_only
+
+    dm = BSPDataModule(h5_path=h5file, verbose=True)
+    monkeypatch.setenv("RANK", "3")  # read by Lightning when a launcher starts it, not here
+    dm._say("first")
+    monkeypatch.setattr(rank_zero_only, "rank", 1)  # as a Trainer sets it on rank 1
+    dm._say("second")
+    assert capsys.readouterr().err == "bsp_fast.data: first\n"
+
+
 def test_benchmark_constructor_uses_the_report_setup(tmp_path):
     (tmp_path / "data.csv").write_text("")
     dm = BSPDataModule.benchmark(tmp_path, batch_size=32)

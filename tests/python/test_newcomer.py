@@ -122,6 +122,15 @@ def test_scheduler_dask_without_the_distributed_extra_names_it(tmp_path):
     assert not (tmp_path / "ds").exists()
 
 
+def test_bsp_train_without_jsonargparse_names_the_torch_extra():
+    r = _without(["jsonargparse"], "from bsp_fast.__main__ import main\n"
+                 "sys.exit(main(['train', '--help']))")
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    assert r.stderr.startswith("bsp-train: bsp-train needs jsonargparse, which is not "
+                               "installed. Install the 'torch' extra: pip install "
+                               "'bsp_fast[torch]'"), r.stderr
+
+
 def test_logger_without_the_loggers_extra_names_it(tmp_path):
     from bsp_fast._extras import install_hint, require_any
 

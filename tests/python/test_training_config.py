@@ -56,19 +56,76 @@ def test_yaml_config_is_safe_and_checked(tmp_path):
 
 
 def test_command_line_overrides_yaml_overrides_defaults(tmp_path):
-    import argparse
-
-    p = argparse.ArgumentParser()
-    C.add_options(p)
-    ns = p.parse_args(["lifting", "--epochs", "5", "--no-augment", "--hp", "hidden=4",
-                       "--hp", "layers=1"])
-    cli = C.explicit_args(ns)
-    assert cli == {"task": "lifting", "epochs": 5, "augment": False,
-                   "hp": {"hidden": 4, "layers": 1}}
+    cli, config, show = C.parse_command_line(C.parser(), [
+        "lifting", "--epochs", "5", "--no-augment", "--hp", "hidden=4", "--hp", "layers=1",
+        "--mjp", "0.25", "--devices", "0,1", "--force"])
+    assert cli == {"task": "lifting", "epochs": 5, "augment": False, "force": True,
+                   "hp": {"hidden": 4, "layers": 1}, "mjp": 0.25, "devices": [0, 1]}
+    assert (config, show) == (None, False)
     merged = C.defaults()
     merged.update({"epochs": 3, "batch_size": 16})  # as from --config
     merged.update(cli)
     assert (merged["epochs"], merged["batch_size"], merged["seed"]) == (5, 16, 22742)
+
+
+def test_command_line_wins_over_config_wherever_it_stands(tmp_path):
+    from bsp_fast.training.train import resolve_config
+
+    run = tmp_path / "run.yaml"
+    run.write_text("task: lifting\nmodel: baseline_3d\ndata: d.h5\nepochs: 3\n"
+                   "batch-size: 16\nout: r\n")
+    for argv in (["--epochs", "5", "--config", str(run)], ["--config", str(run), "--epochs", "5"],
+                 [f"--config={run}", "--epochs=5", "--print-config"]):
+        cli, config, show = C.parse_command_line(C.parser(), argv)
+        assert (cli, config, show == ("--print-config" in argv)) == ({"epochs": 5}, str(run), True)
+        cfg, resume = resolve_config(cli, config)
+        assert (cfg["epochs"], cfg["batch_size"], cfg["model"], resume) == (5, 16, "baseline_3d", None)
+
+
+def test_bad_command_line_values_keep_the_option_messages():
+    import argparse
+
+    p = C.parser()
+    for argv, message in ((["--noise", "-1"], "noise must be >= 0.0, got -1.0"),
+                          (["--epochs", "2.5"], "epochs expects an integer, got '2.5'"),
+                          (["--precision", "8"], "precision must be one of ['auto', '32'"),
+                          (["--mjp", "0.1,0.2"], "mjp takes one value or 26"),
+                          (["--hp", "hidden"], "--hp expects KEY=VALUE, got 'hidden'"),
+                          (["--devices", "x"], "devices must be 'auto', a count"),
+                          (["lifting", "m", "extra"], "unrecognized arguments: extra"),
+                          (["lifting", "m", "--epochz", "3"], "unrecognized arguments: --epochz 3")):
+        with pytest.raises(argparse.ArgumentError) as info:
+            C.parse_command_line(p, argv)
+        assert message in str(info.value), argv
+    with pytest.raises(argparse.ArgumentError, match="task must be one of"):
+        C.parse_command_line(p, ["posing"])
+
+
+def test_print_config_is_the_resolved_config_and_reads_back(tmp_path, capsys):
+    from bsp_fast.training.train import main
+
+    first = tmp_path / "a.yaml"
+    first.write_text("task: lifting\nmodel: baseline_3d\nepochs: 3\nhp: {linear_size: 8}\n")
+    argv = ["--config", str(first), "--data", "d.h5", "--out", "r", "--mjp", "0.5",
+            "--print-config"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("# bsp-train resolved config (usable as --config)\n")
+    printed = tmp_path / "printed.yaml"
+    printed.write_text(text)
+    cfg = C.read_yaml(printed)
+    assert list(cfg) == [o.name for o in C.OPTIONS]
+    assert (cfg["task"], cfg["epochs"], cfg["hp"], cfg["mjp"], cfg["data"], cfg["seed"]) == (
+        "lifting", 3, {"linear_size": 8}, 0.5, "d.h5", 22742)
+    assert main(["--config", str(printed), "--print-config"]) == 0
+    assert capsys.readouterr().out == text  # a fixed point
+    assert main(["--config", str(first), "--data", "d.h5", "--noise", "-1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("usage: bsp-train") and "noise must be >= 0.0, got -1.0" in err
+    assert main(["pose_estimation", "pose_cnn", "--data", "d.h5", "--mjp", "0.1",
+                 "--print-config"]) == 2
+    assert "noise/mjp deform 2D joint inputs; pose_estimation reads images" in \
+        capsys.readouterr().err
 
 
 def test_run_directory_is_renamed_only_when_complete(tmp_path):

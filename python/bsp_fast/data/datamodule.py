@@ -17,13 +17,15 @@ from .datasets import DEFAULT_EVAL_SEED, SPLITS, TASKS, ClipDataset
 
 try:
     from lightning.pytorch import LightningDataModule as _Base
+    from lightning.pytorch.utilities import rank_zero_only
     LIGHTNING = True
 except ImportError:  # pragma: no cover - depends on the environment
     try:
         from pytorch_lightning import LightningDataModule as _Base
+        from pytorch_lightning.utilities import rank_zero_only
         LIGHTNING = True
     except ImportError:
-        _Base, LIGHTNING = object, False
+        _Base, LIGHTNING, rank_zero_only = object, False, None
 
 __all__ = ["BSPDataModule", "LIGHTNING"]
 
@@ -44,10 +46,9 @@ def _plain_value(v) -> bool:
 
 
 def _rank_zero() -> bool:
-    for name in ("RANK", "LOCAL_RANK", "SLURM_PROCID"):
-        if os.environ.get(name, "0") not in ("", "0"):
-            return False
-    return True
+    """Whether this is the first process: Lightning's rank (from the launcher's
+    environment, then the Trainer's); without Lightning, the only process."""
+    return getattr(rank_zero_only, "rank", 0) == 0
 
 
 class BSPDataModule(_Base):

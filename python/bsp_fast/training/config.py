@@ -1,9 +1,16 @@
-"""Options of ``bsp-train``: one table drives the command line, ``--config run.yaml`` (safe
-YAML, same names with ``_`` or ``-``), the Python API (``bsp_fast.train(**options)``) and
-the resolved ``config.yaml`` every run writes back.
+"""Options of ``bsp-train``: one table (``OPTIONS``) drives the command line (a jsonargparse
+parser, :func:`parser`), ``--config run.yaml`` (safe YAML, same names with ``_`` or ``-``),
+the Python API (``bsp_fast.train(**options)``: :func:`normalise`), ``--print-config`` and
+the resolved ``config.yaml`` every run writes back (:func:`dump`).
 
 Precedence: built-in defaults < the saved config of a ``--resume``d run < ``--config``
-YAML < options given on the command line (or as keywords).
+YAML < options given on the command line (or as keywords), whatever their order on the
+line (``training.train.resolve_config``; docs/design.md says why ``--config`` is not jsonargparse's
+``ActionConfigFile``).
+
+Adding an option is one entry in ``OPTIONS``: ``_o(name, kind, default, help, group,
+...)``, where ``kind`` names a converter of ``KINDS`` or is a function ``value -> value``
+that raises :class:`ConfigError` (or ``ValueError``) for a bad value.
 """
 from __future__ import annotations
 
@@ -13,11 +20,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..defaults import SEED
+from .tasks import TASKS, get_task  # the task registry (no torch)
 
-__all__ = ["OPTIONS", "TASKS", "ConfigError", "defaults", "add_options", "read_yaml",
-           "normalise", "validate", "parse_hp", "write_yaml", "explicit_args"]
+__all__ = ["OPTIONS", "BY_NAME", "KINDS", "ConfigError", "defaults", "parser",
+           "parse_command_line", "read_yaml", "normalise", "validate",
+           "parse_hp", "dump", "write_yaml"]
 
-TASKS = ("classification", "autoencoder", "lifting", "pose_estimation")
 ACCELERATORS = ("auto", "cpu", "gpu")
 STRATEGIES = ("auto", "ddp", "ddp_spawn", "ddp_find_unused_parameters_true")
 PRECISIONS = ("auto", "32", "64", "bf16-mixed", "16-mixed", "bf16-true")
@@ -25,14 +33,18 @@ LOGGERS = ("csv", "tensorboard", "wandb")
 LIFTING_TARGETS = ("absolute", "world", "camera")
 
 
-class ConfigError(ValueError):
-    """A bad option value or an unknown option (exit code 2 on the command line)."""
+class ConfigError(ValueError, argparse.ArgumentTypeError):
+    """A bad option value or an unknown option (exit code 2 on the command line). Also an
+    ``ArgumentTypeError``: raised by a converter while jsonargparse parses the command
+    line, its message is the one the parser reports."""
 
 
 @dataclass(frozen=True)
 class Option:
     name: str
-    kind: str          # int, float, str, bool, flag, mjp, hp, devices, path
+    #: a KINDS name (int, float, str, path, flag, bool, mjp, hp, devices) or a function
+    #: ``value -> value`` raising ConfigError or ValueError
+    kind: object
     default: object
     help: str
     group: str
@@ -40,14 +52,34 @@ class Option:
     minimum: float | None = None
     metavar: str | None = None
 
+    def convert(self, value):
+        """``value`` (a command-line string or a YAML/Python value) as this option's type;
+        :class:`ConfigError` naming the option and the allowed values otherwise."""
+        if value is None:
+            if self.kind in ("flag", "bool"):
+                raise ConfigError(f"{self.name} must be true or false, got null")
+            return None
+        try:
+            value = (KINDS[self.kind] if isinstance(self.kind, str) else self.kind)(value)
+        except ConfigError:
+            raise
+        except (TypeError, ValueError):
+            what = {"int": "an integer", "float": "a finite number", "str": "a string",
+                    "path": "a string"}.get(self.kind, "a valid value")
+            raise ConfigError(f"{self.name} expects {what}, got {value!r}") from None
+        if self.choices and value not in self.choices:
+            raise ConfigError(f"{self.name} must be one of {list(self.choices)}, got {value!r}")
+        if self.minimum is not None and value < self.minimum:
+            raise ConfigError(f"{self.name} must be >= {self.minimum}, got {value!r}")
+        return value
 
-def _o(name, kind, default, help, group, **kw):
-    return Option(name, kind, default, help, group, **kw)
+
+_o = Option  # _o(name, kind, default, help, group, choices=, minimum=, metavar=)
 
 
 OPTIONS: tuple = (
     # ------------------------------------------------------------------ what to train
-    _o("task", "str", None, "task: " + ", ".join(TASKS), "run", choices=TASKS),
+    _o("task", "str", None, "task: " + ", ".join(TASKS), "run", choices=tuple(TASKS)),
     _o("model", "str", None, "registered model of the task (see the list below)", "run"),
     _o("data", "path", None, "CARLA-BSP dataset directory (converted on first use, cached "
        "in that directory) or a bsp-convert HDF5 file", "run", metavar="DATASET_OR_H5"),
@@ -137,7 +169,25 @@ def defaults() -> dict:
             for o in OPTIONS}
 
 
-# ---------------------------------------------------------------------- parsing values
+# ---------------------------------------------------------------------- converters (KINDS)
+def _int(value) -> int:
+    if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+        raise ValueError
+    return int(value)
+
+
+def _float(value) -> float:
+    if isinstance(value, bool) or not math.isfinite(value := float(value)):
+        raise ValueError
+    return value
+
+
+def _str(value) -> str:
+    if isinstance(value, (dict, list, bool)):
+        raise ValueError
+    return str(value)
+
+
 def _bool(value) -> bool:
     if isinstance(value, bool):
         return value
@@ -213,47 +263,11 @@ def _devices(value):
                           f"indices, got {value!r}") from None
 
 
-def _convert(opt: Option, value):
-    if value is None:
-        if opt.kind in ("flag", "bool"):
-            raise ConfigError(f"{opt.name} must be true or false, got null")
-        return None
-    kind = opt.kind
-    try:
-        if kind in ("flag", "bool"):
-            return _bool(value)
-        if kind == "mjp":
-            return _mjp(value)
-        if kind == "hp":
-            return parse_hp(value)
-        if kind == "devices":
-            return _devices(value)
-        if kind == "int":
-            if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
-                raise ValueError
-            value = int(value)
-        elif kind == "float":
-            if isinstance(value, bool):
-                raise ValueError
-            value = float(value)
-            if not math.isfinite(value):
-                raise ValueError
-        elif kind in ("str", "path"):
-            if isinstance(value, (dict, list, bool)):
-                raise ValueError
-            value = str(value)
-    except ConfigError:
-        raise
-    except (TypeError, ValueError):
-        what = {"int": "an integer", "float": "a finite number"}.get(kind, "a string")
-        raise ConfigError(f"{opt.name} expects {what}, got {value!r}") from None
-    if opt.choices and value not in opt.choices:
-        raise ConfigError(f"{opt.name} must be one of {list(opt.choices)}, got {value!r}")
-    if opt.minimum is not None and value < opt.minimum:
-        raise ConfigError(f"{opt.name} must be >= {opt.minimum}, got {value!r}")
-    return value
+KINDS = {"int": _int, "float": _float, "str": _str, "path": _str, "flag": _bool,
+         "bool": _bool, "mjp": _mjp, "hp": parse_hp, "devices": _devices}
 
 
+# ---------------------------------------------------------------------- whole configs
 def normalise(values: dict, source: str = "options") -> dict:
     """Known option names (``-`` or ``_``) with converted values; unknown names are a
     :class:`ConfigError` listing the allowed ones."""
@@ -263,19 +277,22 @@ def normalise(values: dict, source: str = "options") -> dict:
         if name not in BY_NAME:
             raise ConfigError(f"{source}: unknown option {key!r}; allowed: "
                               + ", ".join(o.name for o in OPTIONS))
-        out[name] = _convert(BY_NAME[name], value)
+        out[name] = BY_NAME[name].convert(value)
     return out
 
 
 def validate(cfg: dict) -> dict:
     """Cross-option checks on a complete config (task, model and hyper-parameters against
-    the model registry). Returns the config with the model's full hyper-parameters."""
+    the task and model registries)."""
     cfg = dict(cfg)
     if cfg.get("task") is None:
         raise ConfigError("no task given; allowed: " + ", ".join(TASKS))
+    from .. import models
+
+    names = models.available(cfg["task"])
     if cfg.get("model") is None:
         raise ConfigError(f"no model given for task {cfg['task']!r}; allowed: "
-                          + ", ".join(_models(cfg["task"])))
+                          + ", ".join(names))
     if cfg.get("data") is None:
         raise ConfigError("no data given (--data DATASET_DIR or clips.h5)")
     if cfg["label"] != "last" and not cfg["label"].startswith("any:"):
@@ -286,11 +303,8 @@ def validate(cfg: dict) -> dict:
         parse_duration(cfg.get("checkpoint_every", 0))
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
-    if cfg["task"] == "pose_estimation" and (cfg["noise"] or cfg["mjp"]):
-        raise ConfigError("noise/mjp deform 2D joint inputs; pose_estimation reads images")
-    from .. import models
-
-    names = models.available(cfg["task"])
+    if get_task(cfg["task"]).image_inputs and (cfg["noise"] or cfg["mjp"]):
+        raise ConfigError(f"noise/mjp deform 2D joint inputs; {cfg['task']} reads images")
     if cfg["model"] not in names:
         raise ConfigError(f"unknown model {cfg['model']!r} for task {cfg['task']!r}; "
                           f"allowed: {', '.join(names)}")
@@ -302,18 +316,10 @@ def validate(cfg: dict) -> dict:
     return cfg
 
 
-def _models(task: str) -> list:
-    try:
-        from .. import models
-
-        return list(models.available(task))
-    except Exception:  # pragma: no cover - only for the message
-        return []
-
-
 # ---------------------------------------------------------------------- YAML
 def read_yaml(path) -> dict:
-    """A run config (``--config``): a mapping of option names, safe YAML only."""
+    """A run config (``--config``): a mapping of option names, safe YAML only; a run's
+    ``config.yaml`` is one (its ``resolved`` and ``versions`` sections are ignored)."""
     import yaml
 
     p = Path(path)
@@ -331,50 +337,72 @@ def read_yaml(path) -> dict:
     return normalise(doc, f"--config {p}")
 
 
-def write_yaml(cfg: dict, path, extra: dict | None = None) -> None:
-    """The resolved config: every option in table order, then ``extra`` (what the run
-    resolved: precision, data file, model hyper-parameters, versions)."""
+def dump(cfg: dict, extra: dict | None = None) -> str:
+    """The config as YAML usable as ``--config`` (``--print-config``, ``config.yaml``):
+    every option in table order, then ``extra`` (what the run resolved: precision, data
+    file, model hyper-parameters, versions)."""
     import yaml
 
     doc = {o.name: cfg.get(o.name) for o in OPTIONS}
     doc.update(extra or {})
-    text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
-    Path(path).write_text("# bsp-train resolved config (usable as --config)\n" + text,
-                          encoding="utf-8")
+    return ("# bsp-train resolved config (usable as --config)\n"
+            + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
 
 
-# ---------------------------------------------------------------------- argparse
-def add_options(parser: argparse.ArgumentParser) -> None:
-    """Adds every option; values not given stay absent (``explicit_args``)."""
+def write_yaml(cfg: dict, path, extra: dict | None = None) -> None:
+    Path(path).write_text(dump(cfg, extra), encoding="utf-8")
+
+
+# ---------------------------------------------------------------------- command line
+class _MergeHp(argparse.Action):
+    """``--hp a=1 --hp b=2`` -> ``{"a": 1, "b": 2}`` (each item already a dict)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, {**(getattr(namespace, self.dest, None) or {}), **values})
+
+
+def parser(prog: str = "bsp-train", description: str | None = None, epilog: str | None = None):
+    """The command line: jsonargparse's ``ArgumentParser`` with ``TASK MODEL``, ``--config``,
+    ``--print-config`` and one option per table entry, typed by the entry's converter (its
+    :class:`ConfigError` is the parser's message). Nothing has a parser default: read the
+    options given with :func:`parse_command_line`."""
+    from .._extras import require
+
+    ArgumentParser = require("jsonargparse", prog).ArgumentParser
     S = argparse.SUPPRESS
-    parser.add_argument("task", nargs="?", default=S, metavar="TASK", help=BY_NAME["task"].help)
-    parser.add_argument("model", nargs="?", default=S, metavar="MODEL",
-                        help=BY_NAME["model"].help)
-    parser.add_argument("--config", default=S, metavar="RUN.yaml",
-                        help="read options from a YAML file (any option below, by name); "
-                             "options on the command line override it")
+    p = ArgumentParser(prog=prog, description=description, epilog=epilog,
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       exit_on_error=False, print_config=None, allow_abbrev=True)
+    for o in OPTIONS[:2]:  # argparse passes an absent positional's default to its type
+        p.add_argument(o.name, nargs="?", default=S, metavar=o.name.upper(), help=o.help,
+                       type=lambda v, o=o: v if v is S else o.convert(v))
+    p.add_argument("--config", default=S, metavar="RUN.yaml",
+                   help="read options from a YAML file (any option below, by name); "
+                        "options on the command line override it, wherever they stand")
+    p.add_argument("--print-config", action="store_true", default=S,
+                   help="print the resolved config as YAML (usable as --config) and exit")
     titles = {"run": "run", "data": "data (converter and loader options)",
               "model": "model", "training": "training"}
-    groups = {g: parser.add_argument_group(t) for g, t in titles.items()}
-    for o in OPTIONS:
-        if o.name in ("task", "model"):
-            continue
-        flag = "--" + o.name.replace("_", "-")
+    groups = {g: p.add_argument_group(t) for g, t in titles.items()}
+    for o in OPTIONS[2:]:
         default = o.default if not isinstance(o.default, dict) else "{}"
         text = o.help + (f" (default: {default})" if default not in (None, False, "{}") else "")
-        g = groups[o.group]
+        kw = dict(default=S, help=text)
         if o.kind == "flag":
-            g.add_argument(flag, action="store_const", const=True, default=S, help=text)
+            kw.update(action="store_true")
         elif o.kind == "bool":
-            g.add_argument(flag, action=argparse.BooleanOptionalAction, default=S, help=text)
-        elif o.kind == "hp":
-            g.add_argument(flag, action="append", default=S, metavar=o.metavar, help=text)
+            kw.update(action=argparse.BooleanOptionalAction)
         else:
-            metavar = o.metavar or ("|".join(o.choices) if o.choices else o.name.upper())
-            g.add_argument(flag, default=S, metavar=metavar, help=text)
+            kw.update(type=o.convert, metavar=o.metavar or
+                      ("|".join(o.choices) if o.choices else o.name.upper()))
+            if o.kind == "hp":
+                kw.update(action=_MergeHp)
+        groups[o.group].add_argument("--" + o.name.replace("_", "-"), **kw)
+    return p
 
 
-def explicit_args(ns: argparse.Namespace) -> dict:
-    """The options actually given on the command line, converted."""
-    given = {k: v for k, v in vars(ns).items() if k != "config"}
-    return normalise(given, "command line")
+def parse_command_line(p, argv) -> tuple:
+    """``(options given, --config path or None, --print-config)``; a bad or unknown
+    option raises ``argparse.ArgumentError``."""
+    given = p.parse_args(list(argv), defaults=False).as_dict()
+    return given, given.pop("config", None), bool(given.pop("print_config", False))

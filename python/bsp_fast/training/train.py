@@ -18,7 +18,7 @@ from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, read
     read_run, refuse_unsafe_output, resolve_checkpoint, resume_hint, write_json, write_marker
 from .precision import check_precision, native_bf16, resolve_precision
 from .setup import make_datamodule, make_trainer, prepare_data, rank as _rank
-from .tasks import get_task
+from .tasks import TASKS, get_task
 
 # (resolve_precision, native_bf16 and check_precision live in .precision; importable here too)
 __all__ = ["train", "main", "TrainResult", "resolve_precision", "native_bf16", "check_precision",
@@ -339,7 +339,7 @@ def _epilog() -> str:
     try:
         from .. import models
 
-        for task in C.TASKS:
+        for task in TASKS:
             lines.append(f"  {task}:")
             for name, text in models.available(task).items():
                 lines.append(f"    {name:24s} {text}")
@@ -351,23 +351,33 @@ def _epilog() -> str:
     return "\n".join(lines)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+def build_parser():
+    """bsp-train's jsonargparse parser (``config.parser``)."""
+    return C.parser(
         prog="bsp-train",
         description="Train a baseline of the CARLA-BSP report on one task, test its best "
                     "checkpoint (lowest val loss) and write a run directory: config.yaml, "
                     "metrics.json, curves.png, checkpoints/, logs/.",
-        epilog=_epilog(), formatter_class=argparse.RawDescriptionHelpFormatter)
-    C.add_options(p)
-    return p
+        epilog=_epilog())
 
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    ns = build_parser().parse_args(argv)
     try:
-        cli = C.explicit_args(ns)
-        result = _train(cli, getattr(ns, "config", None))
+        parser = build_parser()
+    except ImportError as exc:  # jsonargparse, of the 'torch' extra
+        print(f"bsp-train: {exc}", file=sys.stderr)
+        return 1
+    try:
+        cli, config_path, print_config = C.parse_command_line(parser, argv)
+        if print_config:
+            print(C.dump(resolve_config(cli, config_path)[0]), end="")
+            return 0
+        result = _train(cli, config_path)
+    except argparse.ArgumentError as exc:  # argparse's form: usage, then the message
+        parser.print_usage(sys.stderr)
+        print(f"bsp-train: error: {exc}", file=sys.stderr)
+        return 2
     except C.ConfigError as exc:
         print(f"bsp-train: {exc}", file=sys.stderr)
         return 2

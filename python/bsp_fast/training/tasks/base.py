@@ -73,6 +73,8 @@ class Task:
     curves: tuple = ()
     #: inputs can be deformed (``--noise``, ``--mjp``): tables show the setting columns
     deformed_inputs: bool = False
+    #: the inputs are pedestrian crops, not 2D joints: ``--noise``/``--mjp`` do not apply
+    image_inputs: bool = False
     #: flips/rotations of the train clips apply (``--augment``)
     augments: bool = False
     #: unit of the de-normalised predictions ``bsp-predict`` writes

@@ -11,6 +11,7 @@ class PoseEstimation(Task):
     description = "pedestrian crops -> 2D joints"
     batch_keys = ("inputs", "visible", "targets", "crop_box", "label", "meta")
     baseline = "mean crop skeleton"
+    image_inputs = True
     metrics = (Metric("pck_0.05", "PCK@0.05", "fraction", "higher", "pct"),
                Metric("pckhn_0.1", "PCKhn@0.1", "fraction", "higher", "pct"))
     curves = ("pck_0.05", "pckhn_0.1")
