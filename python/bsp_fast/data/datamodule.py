@@ -11,8 +11,9 @@ import sys
 from pathlib import Path
 
 from .. import conversion
-from ..defaults import CONVERT as DEFAULTS
+from ..defaults import CONVERT as DEFAULTS, POSE_CROP_CONTEXT
 from . import cache as _cache
+from .cache import file_crop_box
 from .datasets import DEFAULT_EVAL_SEED, SPLITS, TASKS, ClipDataset
 
 try:
@@ -103,6 +104,8 @@ class BSPDataModule(_Base):
         self.convert_options = dict(convert_options or {})
         # media crops cost decoding time and space; only pose estimation reads them
         self.convert_options.setdefault("media", task == "pose_estimation")
+        if task == "pose_estimation":  # box noise is cut out of the wider context crops
+            self.convert_options.setdefault("crop_context", POSE_CROP_CONTEXT)
         self._given_h5 = h5_path is not None
         self._h5 = Path(h5_path) if h5_path is not None else None
         self.cache_dir = Path(cache_dir) if cache_dir is not None else None
@@ -246,7 +249,8 @@ class BSPDataModule(_Base):
         a = ds.attrs
         checks = [("clip_length", self._explicit["clip_length"], a.get("clip_length")),
                   ("clip_offset", self._explicit["clip_offset"], a.get("clip_stride")),
-                  ("benchmark", self.benchmark_windows or None, bool(a.get("benchmark", 0)))]
+                  ("benchmark", self.benchmark_windows or None, bool(a.get("benchmark", 0))),
+                  ("crop_box", self.convert_options.get("crop_box"), file_crop_box(a))]
         wanted, stored = {}, {}
         for name, want, have in checks:
             if want is not None and have is not None and want != type(want)(have):

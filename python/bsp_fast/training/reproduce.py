@@ -21,7 +21,7 @@ from ..atomic import write_text
 from .runs import RunError, read_run
 from .findings import NA, NO, YES, evaluate_findings, format_value
 from .table_files import (BUDGETS, KINDS, RELATIONS, TABLES, experiments_dir, experiments_dirs,
-                          load_table, row_options)
+                          load_table, prepare_row_data, row_options)
 from .tasks import get_task
 from .tasks.classification import constant_f1
 
@@ -67,6 +67,7 @@ def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrid
             run_dir = base / row["name"]
             opts = row_options(tab, row, budget, data, run_dir, overrides)
             C.validate(C.defaults() | opts)  # unknown models / hyper-parameters fail first
+            opts = prepare_row_data(tab, row, opts, convert=not dry_run)
             plan.append((row, run_dir, opts))
     results = {}
     for row, run_dir, opts in plan:
