@@ -284,7 +284,12 @@ class BSPDataModule(_Base):
             options["augment"] = self.augment and train
         if self.task == "pose_estimation":
             options.pop("noise"), options.pop("mjp")
-        options.update(self.dataset_options)
+        extra = dict(self.dataset_options)
+        # box_jitter: the train split's box noise; box_noise: val and test (evaluation)
+        jitter, noise = extra.pop("box_jitter", None), extra.pop("box_noise", None)
+        if (jitter if train else noise):
+            options["box_noise"] = tuple(jitter if train else noise)
+        options.update(extra)
         return ClipDataset(self.h5_path, split, self.task, **options)
 
     def _loader(self, split: str):

@@ -160,7 +160,7 @@ def prepare_row_data(table: dict, row: dict, opts: dict, convert: bool = True) -
                 "only in a row that asks for it as an upper bound): give the dataset "
                 f"directory, or convert again with bsp-convert DATASET OUT.h5 --crop-box {want}")
         return opts
-    if want == "mask":
+    if want == "mask" or (not convert and not data.is_dir()):
         return opts
     from .train import make_datamodule, prepare_data
 

@@ -15,6 +15,12 @@ class PoseEstimation(Task):
                Metric("pckhn_0.1", "PCKhn@0.1", "fraction", "higher", "pct"))
     curves = ("pck_0.05", "pckhn_0.1")
 
+    def dataset_options(self, cfg: dict) -> dict:
+        """Train-time box jitter (``box_jitter_scale``, ``box_jitter_shift``; default off):
+        the train split's crop boxes perturbed per frame and re-cut from the context crops."""
+        scale, shift = cfg.get("box_jitter_scale", 0.0) or 0.0, cfg.get("box_jitter_shift", 0.0) or 0.0
+        return {"box_jitter": (float(scale), float(shift))} if scale or shift else {}
+
     def metric_modules(self) -> dict:
         from ... import metrics as M
 
