@@ -8,7 +8,7 @@ The C++ core keeps its own copy of the conversion defaults in
 """
 from __future__ import annotations
 
-__all__ = ["SEED", "CONVERT"]
+__all__ = ["SEED", "CONVERT", "CROP_BOXES", "POSE_CROP_CONTEXT"]
 
 SEED = 22742
 """The original code's seed: the converter's split shuffle, training (weights, noise, batch
@@ -17,6 +17,17 @@ order) and the fixed evaluation noise all default to it."""
 CONVERT = dict(
     clip_length=30, benchmark_clip_length=16, benchmark_clip_offset=6,
     val_frac=0.2, test_frac=0.2, seed=SEED, fov=90.0, crop_size=128, label="last",
+    crop_box="mask", crop_context=1.0,
 )
 """bsp-convert's defaults (``bsp_fast.convert``, ``conversion_settings``, ``bsp-convert``,
 ``BSPDataModule``)."""
+
+CROP_BOXES = ("mask", "mask+joints", "joints")
+"""What a crop box is made from (docs/hdf5-schema.md, "Crop box"): the segmentation mask's
+box (the default: what a person detector could see), the union of the mask box and the
+ground-truth joint box (an upper bound: partly cut from the answer), the joint box."""
+
+POSE_CROP_CONTEXT = 1.25
+"""The crop context ``BSPDataModule`` converts with for ``pose_estimation`` (bsp-convert's
+default is 1, none): enough for box noise of scale +-10 % and shift +-5 % of the side
+(docs/data.md, "Box noise")."""

@@ -43,7 +43,7 @@ TEST_CASE("frame_media: mask bbox, pixel count and per-joint visibility by hand"
   set(6, 2.5f, 4);    // halves round up: (3, 4) is 2 px from (5, 4) -> visible
   set(7, -1, 5);      // left of the image, 6 px from the mask -> hidden
   set(8, 9, 12);      // (8, 11) is (1, 1) away -> visible
-  const FrameMedia m = frame_media(tags.data(), 20, 16, uv.data());
+  const FrameMedia m = frame_media(tags.data(), 20, 16, uv.data(), CropBoxPolicy::mask_joints);
   CHECK(m.mask_bbox == std::array<std::int32_t, 4>{5, 4, 9, 12});
   CHECK(m.visible_pixels == 32);
   const std::vector<int> hidden = {2, 3, 4, 5, 7};
@@ -51,7 +51,7 @@ TEST_CASE("frame_media: mask bbox, pixel count and per-joint visibility by hand"
     const bool h = std::find(hidden.begin(), hidden.end(), j) != hidden.end();
     CHECK_MESSAGE(m.joint_visible[j] == (h ? 0 : 1), "joint " << j);
   }
-  // joints u -1..11, v 4..13 and mask [5, 9) x [4, 12): union 12 x 9 -> the 32 px minimum,
+  // mask+joints: joints u -1..11, v 4..13 and mask [5, 9) x [4, 12): union 12 x 9 -> the 32 px minimum,
   // centre (5, 8.5): corner floor(5 - 16 + 0.5) = -11, floor(8.5 - 16 + 0.5) = -7.
   CHECK(m.crop_box == std::array<float, 4>{-11, -7, 21, 25});
 }
@@ -67,12 +67,39 @@ TEST_CASE("frame_media: 20 % margin around a large mask, and no mask means nothi
   const std::vector<std::uint8_t> empty(200 * 100, 7);
   auto spread = joints_at(100, 50);
   spread[0] = 20, spread[1] = 10;   // joint bbox 20..100 x 10..50: 80 x 40
-  const FrameMedia e = frame_media(empty.data(), 200, 100, spread.data());
+  const FrameMedia e = frame_media(empty.data(), 200, 100, spread.data(), CropBoxPolicy::mask_joints);
   CHECK(e.mask_bbox == std::array<std::int32_t, 4>{-1, -1, -1, -1});
   CHECK(e.visible_pixels == 0);
   for (int j = 0; j < 26; ++j) CHECK(e.joint_visible[j] == 0);
   // side 96 around (60, 30): corner (floor(12.5), floor(-17.5)) = (12, -18).
   CHECK(e.crop_box == std::array<float, 4>{12, -18, 108, 78});
+}
+
+TEST_CASE("frame_media: the crop box policy (mask, mask+joints, joints) by hand") {
+  const auto tags = frame(200, 100, 50, 10, 90, 80);  // mask [50, 90) x [10, 80): 40 x 70
+  const auto uv = joints_at(40, 40);                   // every joint left of the mask
+  // mask: side ceil(1.2 * 70) = 84 around (70, 45) -> corner (28, 3), the joints ignored
+  CHECK(frame_media(tags.data(), 200, 100, uv.data(), CropBoxPolicy::mask).crop_box ==
+        std::array<float, 4>{28, 3, 112, 87});
+  // mask+joints: union u 40..90, v 10..80 (50 x 70): side 84 around (65, 45) -> (23, 3)
+  CHECK(frame_media(tags.data(), 200, 100, uv.data(), CropBoxPolicy::mask_joints).crop_box ==
+        std::array<float, 4>{23, 3, 107, 87});
+  // joints: a point, so the 32 px minimum around (40, 40) -> (24, 24)
+  CHECK(frame_media(tags.data(), 200, 100, uv.data(), CropBoxPolicy::joints).crop_box ==
+        std::array<float, 4>{24, 24, 56, 56});
+  // no pedestrian pixel: no crop under mask, the joints' box under the others
+  const std::vector<std::uint8_t> empty(200 * 100, 7);
+  const FrameMedia none = frame_media(empty.data(), 200, 100, uv.data(), CropBoxPolicy::mask);
+  CHECK_FALSE(none.has_crop());
+  for (float x : none.crop_box) CHECK(std::isnan(x));
+  CHECK(frame_media(empty.data(), 200, 100, uv.data(), CropBoxPolicy::mask_joints).crop_box ==
+        std::array<float, 4>{24, 24, 56, 56});
+  CHECK(crop_box_policy("mask+joints") == CropBoxPolicy::mask_joints);
+  CHECK(std::string(crop_box_name(CropBoxPolicy::joints)) == "joints");
+  CHECK_THROWS_AS(crop_box_policy("union"), std::invalid_argument);
+  // context 1.25 of an 84 px box: 105 px, corner moved by floor(21 / 2) = 10
+  CHECK(context_box({28, 3, 112, 87}, 1.25) == std::array<float, 4>{18, -7, 123, 98});
+  CHECK(context_size(128, 1.25) == 160);
 }
 
 TEST_CASE("crop_resize: zero padding outside the image, nearest and area resizing") {

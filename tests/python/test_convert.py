@@ -88,7 +88,8 @@ def test_cpp_conversion_defaults_equal_python_defaults():
     from bsp_fast.defaults import CONVERT, SEED
 
     cpp = core.convert_defaults()
-    assert set(cpp) == {"clip_length", "val_frac", "test_frac", "seed", "fov", "crop_size"}
+    assert set(cpp) == {"clip_length", "val_frac", "test_frac", "seed", "fov", "crop_size",
+                        "crop_box", "crop_context"}
     assert cpp == {k: CONVERT[k] for k in cpp}
     assert cpp["seed"] == SEED
 

@@ -80,10 +80,16 @@ def cut(img, box, size, interp):
     return cv2.resize(canvas, (size, size), interpolation=interp)
 
 
-def expected_box(tags, uv):
+def expected_box(tags, uv, policy="mask"):
+    """The crop box of docs/hdf5-schema.md: around the mask box (``mask``, the default; no
+    pedestrian pixel: no crop, all NaN), the union with the joint box, or the joint box."""
     ys, xs = np.nonzero(tags == 4)
-    lo, hi = uv.min(0).astype(np.float64), uv.max(0).astype(np.float64)
-    if len(xs):
+    if policy == "mask" and not len(xs):
+        return np.full(4, np.nan)
+    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    if policy != "mask":
+        lo, hi = uv.min(0).astype(np.float64), uv.max(0).astype(np.float64)
+    if len(xs) and policy != "joints":
         lo = np.minimum(lo, [xs.min(), ys.min()])
         hi = np.maximum(hi, [xs.max() + 1, ys.max() + 1])
     side = max(32.0, np.ceil(1.2 * (hi - lo).max() - 1e-9))
@@ -157,11 +163,14 @@ def test_crops_match_pyav_and_pillow(ds, converted):
                 assert d[f"{s}/frames/visible_pixels"][row] == len(xs)
                 bbox = [xs.min(), ys.min(), xs.max() + 1, ys.max() + 1] if len(xs) else [-1] * 4
                 np.testing.assert_array_equal(d[f"{s}/frames/mask_bbox"][row], bbox)
+                checked += 1
+                if not len(xs):  # fully occluded: no crop, zeros stored
+                    assert not d[f"{s}/frames/rgb"][row].any() and not d[f"{s}/frames/mask"][row].any()
+                    continue
                 np.testing.assert_array_equal(d[f"{s}/frames/mask"][row],
                                               cut(tags[k], box, S, cv2.INTER_NEAREST))
                 want = cut(rgb[k], box, S, cv2.INTER_AREA).astype(int)
                 assert np.abs(d[f"{s}/frames/rgb"][row].astype(int) - want).max() <= 2, (vid, k)
-                checked += 1
     assert checked == sum(converted["media"]["frames"].values()) > 100
 
 
@@ -278,6 +287,9 @@ def test_frame_media_and_crop_resize_wrappers(ds, tmp_path):
     assert m["mask_bbox"].tolist() == [5, 4, 9, 12] and m["visible_pixels"] == 32
     assert m["joint_visible"][:3].tolist() == [1, 1, 0]
     np.testing.assert_array_equal(m["crop_box"], expected_box(tags, uv))
+    for policy in ("mask+joints", "joints"):
+        np.testing.assert_array_equal(cv.frame_media(tags, uv, policy)["crop_box"],
+                                      expected_box(tags, uv, policy))
     np.testing.assert_array_equal(m["joint_visible"], expected_visible(tags, uv))
     img = np.random.default_rng(0).integers(0, 255, (16, 20, 3), np.uint8)
     for interp, nearest in ((cv2.INTER_AREA, False), (cv2.INTER_NEAREST, True)):

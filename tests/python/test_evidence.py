@@ -314,8 +314,12 @@ FULL_ON_CPU = {"accelerator": "cpu", "limit_batches": 2, "epochs": 1, "max_steps
 def test_full_budget_rows_run_two_batches_on_the_cpu(table, data, tmp_path):
     over = dict(FULL_ON_CPU, **({"crop_size": 32} if table == "pose_estimation" else {}))
     tab = R.load_table(table)
-    res = R.reproduce(tab, data[table], "full", tmp_path, overrides=over, log=lambda s: 0)
-    assert sorted(res["results"]) == sorted(r["name"] for r in tab["rows"])
+    # a row asking for mask+joints crops needs a file (or conversion) of its own: these
+    # files are mask-box files (tests/python/test_crop_policy.py checks the refusal)
+    rows = [r["name"] for r in tab["rows"] if r.get("crop_box", "mask") == "mask"]
+    res = R.reproduce(tab, data[table], "full", tmp_path, overrides=over, rows=rows,
+                      log=lambda s: 0)
+    assert sorted(res["results"]) == sorted(rows)
     for name, r in res["results"].items():
         first = next(iter(tab["metrics"]))
         assert r["metrics"].get(first) is not None, name

@@ -186,7 +186,7 @@ def test_autoencoder_and_pose_findings():
 # ---------------------------------------------------------------------- smoke runs
 SMOKE_ROWS = {"lifting": "poseformer,lstm_relative_rot",
               "classification": "lstm-perfect,graph-perfect",
-              "autoencoder": None, "pose_estimation": None}
+              "autoencoder": None, "pose_estimation": "pose_cnn,average_skeleton"}
 
 
 @pytest.mark.parametrize("table", TABLES)

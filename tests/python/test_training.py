@@ -17,6 +17,7 @@ import yaml
 
 import bsp_fast
 from bsp_fast.data.testing import write_clip_file
+from bsp_fast.skeleton import JOINT_NAMES
 from bsp_fast.training.curves import read_logs
 from bsp_fast.training.evaluate import main as eval_main
 from bsp_fast.training.train import main as train_main
@@ -32,7 +33,9 @@ TINY = {"classification": ("lstm", {"hidden_size": 8, "num_layers": 1}),
 KEYS = {"classification": {"loss", "f1", "precision", "recall", "accuracy"},
         "autoencoder": {"loss", "pck_0.05", "pckhn_0.1", "mjr"},
         "lifting": {"loss", "mpjpe_mm", "n_mpjpe_mm", "pa_mpjpe_mm", "mpjve_mm"},
-        "pose_estimation": {"loss", "pck_0.05", "pckhn_0.1"}}
+        "pose_estimation": {"loss", "pck_0.05", "pckhn_0.1", "pck_0.05_visible",
+                            "pck_0.05_occluded", "pck_0.05_aligned", "pckhn_0.1_aligned",
+                            "fully_occluded_frames"} | {f"pck_0.05/{n}" for n in JOINT_NAMES}}
 REPO = Path(__file__).resolve().parents[2]
 
 

@@ -36,6 +36,9 @@ py::dict report_dict(const ConvertReport& r) {
   for (const BadMedia& b : r.media.bad) bad.append(py::make_tuple(b.path, b.reason));
   media["bad"] = bad;
   media["passes"] = r.media.passes;
+  media["fully_occluded"] = py::dict(py::arg("train") = r.media.fully_occluded[0],
+                                     py::arg("val") = r.media.fully_occluded[1],
+                                     py::arg("test") = r.media.fully_occluded[2]);
   d["media"] = media;
   py::list failures;
   for (const ShardFailure& f : r.shard_failures)
@@ -56,6 +59,8 @@ py::dict convert_defaults() {
   d["seed"] = o.clips.seed;
   d["fov"] = o.fov;
   d["crop_size"] = o.media.crop_size;
+  d["crop_box"] = crop_box_name(o.media.crop_box);
+  d["crop_context"] = o.media.crop_context;
   return d;
 }
 
@@ -76,6 +81,8 @@ py::dict convert(const std::string& csv, const std::string& out, ConvertProgress
   o.source_path = take(d, "source_path", o.source_path);
   o.media.enabled = take(d, "media", o.media.enabled);
   o.media.crop_size = take(d, "crop_size", o.media.crop_size);
+  o.media.crop_box = crop_box_policy(take(d, "crop_box", std::string(crop_box_name(o.media.crop_box))));
+  o.media.crop_context = take(d, "crop_context", o.media.crop_context);
   o.media.skip_bad_media = take(d, "skip_bad_media", o.media.skip_bad_media);
   // --compress covers the RGB crops too unless a level is given.
   o.media.rgb_level = take(d, "media_rgb_level", o.compress ? o.compression_level : o.media.rgb_level);
@@ -97,12 +104,14 @@ py::dict convert(const std::string& csv, const std::string& out, ConvertProgress
   return report_dict(r);
 }
 
-py::dict frame_media_py(const CArray<std::uint8_t>& tags, const CArray<float>& uv) {
+py::dict frame_media_py(const CArray<std::uint8_t>& tags, const CArray<float>& uv,
+                        const std::string& policy) {
   if (tags.ndim() != 2) throw py::value_error("tags must be (H, W) class tags, got " + shape_str(tags));
   if (leading_count(uv, {26, 2}, "uv", "(26, 2)") != 1)
     throw py::value_error("uv must be one frame's (26, 2) joints, got " + shape_str(uv));
   const FrameMedia m = frame_media(tags.data(), static_cast<int>(tags.shape(1)),
-                                   static_cast<int>(tags.shape(0)), uv.data());
+                                   static_cast<int>(tags.shape(0)), uv.data(),
+                                   crop_box_policy(policy));
   auto box = empty<float>({4});
   auto bbox = empty<std::int32_t>({4});
   auto vis = empty<std::uint8_t>({26});
@@ -170,8 +179,18 @@ BSP_BINDING(convert) {
         py::arg("progress") = nullptr,
         "Converts data.csv into an HDF5 file of train/val/test clips; returns the report.");
   m.def("frame_media", &frame_media_py, py::arg("tags"), py::arg("uv"),
+        py::arg("crop_box") = std::string(bsp::crop_box_name(bsp::MediaOptions{}.crop_box)),
         "Pedestrian statistics of one (H, W) segmentation frame with its (26, 2) joints: "
-        "crop_box, mask_bbox, visible_pixels, joint_visible (as bsp-convert stores them).");
+        "crop_box (all NaN: no crop), mask_bbox, visible_pixels, joint_visible (as "
+        "bsp-convert stores them); crop_box policy mask, mask+joints or joints.");
+  m.def("context_box", [](const CArray<float>& box, double context) {
+          if (box.ndim() != 1 || box.shape(0) != 4) throw py::value_error("box must be [u0, v0, u1, v1]");
+          const auto c = bsp::context_box({box.data()[0], box.data()[1], box.data()[2], box.data()[3]}, context);
+          auto out = empty<float>({4});
+          std::copy(c.begin(), c.end(), out.mutable_data());
+          return out;
+        }, py::arg("box"), py::arg("context"),
+        "The context box bsp-convert stores (frames/context_box) for a crop box and factor.");
   m.def("crop_resize", &crop_resize_py, py::arg("image"), py::arg("box"), py::arg("size"),
         py::arg("nearest") = false,
         "Cuts the integer square box [u0, v0, u1, v1] out of an (H, W[, C]) uint8 image with "

@@ -63,6 +63,8 @@ void media_attrs(const h5::Group& g, const MediaOptions& m) {
   g.attr("media", std::int64_t{m.enabled});
   if (!m.enabled) return;
   g.attr("crop_size", std::int64_t{m.crop_size});
+  g.attr("crop_box", std::string(crop_box_name(m.crop_box)));
+  g.attr("crop_context", m.crop_context);
   g.attr("crop_scale", kCropScale);
   g.attr("crop_min_size", std::int64_t{kCropMinSize});
   g.attr("visibility_radius", std::int64_t{kVisibilityRadius});
@@ -169,6 +171,8 @@ void check_media_options(const MediaOptions& m) {
   if (m.rgb_level < 0 || m.rgb_level > 9 || m.mask_level < 0 || m.mask_level > 9)
     throw std::invalid_argument("deflate levels of the frame table must lie in [0, 9] (0 = none)");
   if (m.chunk_frames < 1) throw std::invalid_argument("chunk_frames must be positive");
+  if (!(m.crop_context >= 1.0 && m.crop_context <= 4.0))
+    throw std::invalid_argument("crop context must lie in [1, 4], got " + std::to_string(m.crop_context));
 }
 
 // What the media stage of one pass works on.
@@ -228,7 +232,10 @@ std::vector<detail::MediaFailure> write_output(const std::string& out_path, cons
     ConvertOptions mo = opt;
     mo.media.skip_bad_media = opt.media.skip_bad_media || keep_failures;
     failed = detail::write_media(std::array<const h5::Group*, 3>{&groups[0], &groups[1], &groups[2]},
-                                 table, media->tables, media->files, mo, progress);
+                                 table, media->tables, media->files, mo, progress,
+                                 report.media.fully_occluded);
+    for (std::size_t s = 0; s < 3; ++s)
+      groups[s].attr("fully_occluded_frames", static_cast<std::int64_t>(report.media.fully_occluded[s]));
     report.seconds["media"] = since(t0);
   }
   file.close();

@@ -60,15 +60,19 @@ std::vector<MediaFailure> check_media(const PoseTable& t, const std::array<Frame
                                       const std::vector<MediaFiles>& files, int threads,
                                       ConvertProgress* progress);
 
-// The frame table's datasets (under frames/), one row per table frame.
-enum FrameColumnId { kColRgb, kColMask, kColCropBox, kColJointVisible, kColMaskBbox, kColPixels, kColFrameIdx };
+// The frame table's datasets (under frames/), one row per table frame; the last two only
+// with a crop context (MediaOptions::crop_context > 1).
+enum FrameColumnId {
+  kColRgb, kColMask, kColCropBox, kColJointVisible, kColMaskBbox, kColPixels, kColFrameIdx,
+  kColContextRgb, kColContextBox
+};
 struct FrameColumn {
   std::string name;
   h5::Type type;
   std::vector<hsize_t> tail;  // shape after the frame axis
   std::size_t bytes;          // per frame
 };
-std::vector<FrameColumn> frame_columns(int crop_size);
+std::vector<FrameColumn> frame_columns(const MediaOptions& o);
 
 // One recording's block of the frame table, column by column (frames x bytes).
 struct MediaBlock {
@@ -83,19 +87,21 @@ struct MediaBlock {
   }
 };
 // Decodes block `block` of `table`: the APNG frames first (statistics, crop boxes, masks),
-// then only the crop region of each video frame. Errors are caught into block.failure.
-// Counts finished frames in progress->done.
+// then only the crop (or context) region of each video frame. Errors are caught into
+// block.failure. Counts finished frames in progress->done.
 MediaBlock decode_block(const PoseTable& t, const FrameTable& table, std::size_t block,
-                        const MediaFiles& files, int crop_size, ConvertProgress* progress);
+                        const MediaFiles& files, const MediaOptions& o, ConvertProgress* progress);
 
 // Decodes and crops the frame tables of the three splits and writes frames/* and
 // clip_frames into each group (nullptr: decode only, to find failures). Without
 // skip_bad_media the first failure is rethrown; with it, failures are returned and nothing
 // more is written after the first (the caller converts again without those recordings).
+// `occluded`: frame-table rows without a pedestrian pixel, per split (written blocks).
 std::vector<MediaFailure> write_media(const std::array<const h5::Group*, 3>& groups,
                                       const PoseTable& t, const std::array<FrameTable, 3>& tables,
                                       const std::vector<MediaFiles>& files,
-                                      const ConvertOptions& opt, ConvertProgress* progress);
+                                      const ConvertOptions& opt, ConvertProgress* progress,
+                                      std::array<std::size_t, 3>& occluded);
 
 // ---- Shards (shard.cpp) ----------------------------------------------------------------
 

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
+#include <string>
 #include <opencv2/imgproc.hpp>
 
 #include "bsp/common/errors.hpp"
@@ -52,15 +54,19 @@ bool joint_visible(const std::uint8_t* tags, int width, int height, double u, do
   return false;
 }
 
-// Square box around the centre of (joint bbox U mask bbox), integer edges.
-std::array<float, 4> crop_box(const float* uv, const FrameMedia& m, int width, int height) {
+// Square box around the centre of the policy's box, integer edges (NaN: no crop).
+std::array<float, 4> crop_box(const float* uv, const FrameMedia& m, int width, int height,
+                              CropBoxPolicy policy) {
   double lo_u = INFINITY, lo_v = INFINITY, hi_u = -INFINITY, hi_v = -INFINITY;
-  for (int j = 0; j < J; ++j) {
+  const bool joints = policy != CropBoxPolicy::mask;
+  const bool mask = policy != CropBoxPolicy::joints;
+  if (policy == CropBoxPolicy::mask && !m.visible_pixels) return {NAN, NAN, NAN, NAN};
+  for (int j = 0; joints && j < J; ++j) {
     if (!finite_joint(uv, j)) continue;
     lo_u = std::min<double>(lo_u, uv[2 * j]), hi_u = std::max<double>(hi_u, uv[2 * j]);
     lo_v = std::min<double>(lo_v, uv[2 * j + 1]), hi_v = std::max<double>(hi_v, uv[2 * j + 1]);
   }
-  if (m.visible_pixels) {
+  if (mask && m.visible_pixels) {
     lo_u = std::min<double>(lo_u, m.mask_bbox[0]), lo_v = std::min<double>(lo_v, m.mask_bbox[1]);
     hi_u = std::max<double>(hi_u, m.mask_bbox[2]), hi_v = std::max<double>(hi_v, m.mask_bbox[3]);
   }
@@ -76,13 +82,41 @@ std::array<float, 4> crop_box(const float* uv, const FrameMedia& m, int width, i
 
 }  // namespace
 
-FrameMedia frame_media(const std::uint8_t* tags, int width, int height, const float* uv) {
+const char* crop_box_name(CropBoxPolicy p) {
+  switch (p) {
+    case CropBoxPolicy::mask: return "mask";
+    case CropBoxPolicy::mask_joints: return "mask+joints";
+    case CropBoxPolicy::joints: return "joints";
+  }
+  throw std::invalid_argument("unknown crop box policy");
+}
+
+CropBoxPolicy crop_box_policy(const std::string& name) {
+  for (CropBoxPolicy p : {CropBoxPolicy::mask, CropBoxPolicy::mask_joints, CropBoxPolicy::joints})
+    if (name == crop_box_name(p)) return p;
+  throw std::invalid_argument("crop box must be one of mask, mask+joints, joints, got '" + name + "'");
+}
+
+std::array<float, 4> context_box(const std::array<float, 4>& box, double context) {
+  const double side = box[2] - box[0];
+  const double wide = std::ceil(context * side - 1e-9);
+  const double u0 = box[0] - std::floor((wide - side) / 2), v0 = box[1] - std::floor((wide - side) / 2);
+  return {static_cast<float>(u0), static_cast<float>(v0), static_cast<float>(u0 + wide),
+          static_cast<float>(v0 + wide)};
+}
+
+int context_size(int crop_size, double context) {
+  return static_cast<int>(std::ceil(context * crop_size - 1e-9));
+}
+
+FrameMedia frame_media(const std::uint8_t* tags, int width, int height, const float* uv,
+                       CropBoxPolicy policy) {
   FrameMedia m;
   mask_stats(tags, width, height, m);
   for (int j = 0; j < J; ++j)
     m.joint_visible[j] = m.visible_pixels && finite_joint(uv, j) &&
                          joint_visible(tags, width, height, uv[2 * j], uv[2 * j + 1]);
-  m.crop_box = crop_box(uv, m, width, height);
+  m.crop_box = crop_box(uv, m, width, height, policy);
   return m;
 }
 

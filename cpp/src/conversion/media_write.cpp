@@ -70,10 +70,11 @@ class BlockQueue {
 class FrameTableWriter {
  public:
   FrameTableWriter(const h5::Group& g, std::size_t frames, const MediaOptions& o) : g_(g) {
-    for (FrameColumn& c : frame_columns(o.crop_size)) {
+    for (FrameColumn& c : frame_columns(o)) {
       Column col;
       col.spec = std::move(c);
-      const bool rgb = col.spec.name == "frames/rgb", mask = col.spec.name == "frames/mask";
+      const bool rgb = col.spec.name == "frames/rgb" || col.spec.name == "frames/context_rgb";
+      const bool mask = col.spec.name == "frames/mask";
       const int level = rgb ? o.rgb_level : mask ? o.mask_level : 0;
       // Deflated RGB goes in one-frame chunks: a random clip then inflates only its frames.
       col.chunk = rgb && level > 0 ? 1
@@ -147,8 +148,9 @@ struct Workers {
 std::vector<MediaFailure> write_media(const std::array<const h5::Group*, 3>& groups,
                                       const PoseTable& t, const std::array<FrameTable, 3>& tables,
                                       const std::vector<MediaFiles>& files,
-                                      const ConvertOptions& opt, ConvertProgress* progress) {
-  const int S = opt.media.crop_size;
+                                      const ConvertOptions& opt, ConvertProgress* progress,
+                                      std::array<std::size_t, 3>& occluded) {
+  occluded = {};
   std::array<std::optional<FrameTableWriter>, 3> writers;
   // One queue over the blocks of all splits, so no split's tail leaves threads idle.
   std::vector<std::pair<int, std::size_t>> blocks;  // (split, block)
@@ -170,7 +172,7 @@ std::vector<MediaFailure> write_media(const std::array<const h5::Group*, 3>& gro
     const std::size_t b = blocks[i].second;
     try {
       check_cancel(progress);  // a failure without a path: never skipped, always rethrown
-      return decode_block(t, ft, b, files[ft.recordings[b]], S, progress);
+      return decode_block(t, ft, b, files[ft.recordings[b]], opt.media, progress);
     } catch (...) {  // e.g. bad_alloc before decoding started
       MediaBlock failed;
       failed.failure.recording = ft.recordings[b];
@@ -195,6 +197,8 @@ std::vector<MediaFailure> write_media(const std::array<const h5::Group*, 3>& gro
       for (auto& w : writers) w.reset();  // the pass is redone without it: stop writing
     } else if (auto& w = writers[static_cast<std::size_t>(blocks[i].first)]) {
       w->append(block);
+      for (std::size_t f = 0; f < block.frames; ++f)
+        occluded[static_cast<std::size_t>(blocks[i].first)] += *block.at<std::int64_t>(kColPixels, f) == 0;
     }
   }
   for (auto& w : writers)

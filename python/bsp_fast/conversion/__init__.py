@@ -13,10 +13,11 @@ from __future__ import annotations
 from ..defaults import CONVERT as DEFAULTS
 from .api import conversion_settings, convert
 from .cli import main
-from .crops import crop_resize, frame_media
+from .crops import context_box, crop_resize, frame_media
 from .errors import BadDataset, UnusableConversion
 from .inputs import dataset_csv
 from .report import format_report
 
 __all__ = ["convert", "conversion_settings", "main", "format_report", "frame_media",
-           "crop_resize", "DEFAULTS", "UnusableConversion", "BadDataset", "dataset_csv"]
+           "crop_resize", "context_box", "DEFAULTS", "UnusableConversion", "BadDataset",
+           "dataset_csv"]

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from .._native import core as _core
 from ..atomic import atomic_output
-from ..defaults import CONVERT
+from ..defaults import CONVERT, CROP_BOXES
 from . import report as _report
 from .errors import UnusableConversion
 from .inputs import dataset_csv, dataset_fov, refuse_inputs_as_output
@@ -88,7 +88,9 @@ def conversion_settings(dataset, *, clip_length=None, clip_offset=None, eval_cli
                         fov=None, min_video_length=None, label=CONVERT["label"], benchmark=False,
                         val_frac=CONVERT["val_frac"], test_frac=CONVERT["test_frac"],
                         seed=CONVERT["seed"], balance=False, compress=False, media=True,
-                        crop_size=CONVERT["crop_size"], skip_bad_media=False) -> dict:
+                        crop_size=CONVERT["crop_size"], skip_bad_media=False,
+                        crop_box=CONVERT["crop_box"],
+                        crop_context=CONVERT["crop_context"]) -> dict:
     """The validated, fully resolved options that decide what :func:`convert` writes (the
     ``settings`` of its report and the ``settings_json`` attribute of the file): defaults
     filled in, the FOV looked up in the dataset's config.yaml. Raises ValueError."""
@@ -100,6 +102,11 @@ def conversion_settings(dataset, *, clip_length=None, clip_offset=None, eval_cli
     clip.pop("label_fraction")
     if not isinstance(crop_size, int) or isinstance(crop_size, bool) or not 8 <= crop_size <= 1024:
         raise ValueError(f"crop_size must be an integer in [8, 1024], got {crop_size!r}")
+    if crop_box not in CROP_BOXES:
+        raise ValueError(f"crop_box must be one of {', '.join(CROP_BOXES)}, got {crop_box!r}")
+    if (isinstance(crop_context, bool) or not isinstance(crop_context, (int, float))
+            or not 1 <= crop_context <= 4):
+        raise ValueError(f"crop_context must be a number in [1, 4], got {crop_context!r}")
     fov_source = "argument"
     if fov is None:
         fov, fov_source = dataset_fov(root), "config.yaml"
@@ -110,6 +117,8 @@ def conversion_settings(dataset, *, clip_length=None, clip_offset=None, eval_cli
     return dict(**clip, fov=float(fov), fov_source=fov_source,
                 compress=bool(compress), media=bool(media),
                 crop_size=int(crop_size) if media else None,
+                crop_box=crop_box if media else None,
+                crop_context=float(crop_context) if media else None,
                 skip_bad_media=bool(skip_bad_media) if media else None)
 
 
@@ -118,7 +127,8 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
             val_frac=CONVERT["val_frac"], test_frac=CONVERT["test_frac"], seed=CONVERT["seed"],
             balance=False, threads=None, verify=False, compress=False, media=True,
             crop_size=CONVERT["crop_size"], skip_bad_media=False, force=False,
-            progress=None, strict=False, client=None, shards=None) -> dict:
+            progress=None, strict=False, client=None, shards=None,
+            crop_box=CONVERT["crop_box"], crop_context=CONVERT["crop_context"]) -> dict:
     """Converts a CARLA-BSP dataset into train/val/test clips in one HDF5 file.
 
     ``dataset`` is the dataset directory (or its data.csv). ``clip_length`` defaults to 30
@@ -140,6 +150,12 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
     ``report["media"]["bad"]``. Media paths in data.csv that are absolute or leave the
     dataset root (``..``) are refused before anything is opened. ``compress`` deflates the
     large pose targets and the RGB crops (about 2.5x smaller, much slower random reads).
+    ``crop_box`` says what the crop box is made from: ``"mask"`` (default: the
+    segmentation mask's box, what a detector could see; a frame without a pedestrian pixel
+    gets no crop and is counted as fully occluded, ``report["media"]["fully_occluded"]``),
+    ``"mask+joints"`` (the union with the ground-truth joint box, an upper bound) or
+    ``"joints"``. ``crop_context`` > 1 also stores a wider crop (``frames/context_rgb``)
+    from which box noise is cut (docs/hdf5-schema.md).
 
     ``progress`` (default: when stderr is a terminal) shows a bar per stage. An empty split
     or a split with a single class is listed in ``report["warnings"]`` and warned about
@@ -166,7 +182,7 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
         eval_clip_offset=eval_clip_offset, fov=fov, min_video_length=min_video_length,
         label=label, benchmark=benchmark, val_frac=val_frac, test_frac=test_frac, seed=seed,
         balance=balance, compress=compress, media=media, crop_size=crop_size,
-        skip_bad_media=skip_bad_media)
+        skip_bad_media=skip_bad_media, crop_box=crop_box, crop_context=crop_context)
     _positive("threads", threads)
     _positive("shards", shards)
     if shards is not None and client is None:
@@ -181,6 +197,7 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
                    balance=st["balance"], fov=st["fov"], threads=int(threads or 0),
                    verify=bool(verify), compress=st["compress"], media=st["media"],
                    crop_size=int(crop_size), skip_bad_media=bool(skip_bad_media),
+                   crop_box=crop_box, crop_context=float(crop_context),
                    source_path=str(root.resolve()),
                    extra_attrs={"settings_json": json.dumps(settings, sort_keys=True)})
     out.parent.mkdir(parents=True, exist_ok=True)

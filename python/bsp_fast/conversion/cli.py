@@ -8,7 +8,7 @@ import warnings
 
 from .._native import core as _core
 from ..dask_cluster import SCHEDULER_HELP, run_on_scheduler
-from ..defaults import CONVERT
+from ..defaults import CONVERT, CROP_BOXES
 from .api import convert
 from .errors import BadDataset, UnusableConversion
 from .report import format_report, verify_table
@@ -84,6 +84,14 @@ def _parser() -> argparse.ArgumentParser:
                    help="skip the media: no crops, masks or joint visibility, no MP4/APNG opened")
     p.add_argument("--crop-size", type=int, default=CONVERT["crop_size"], metavar="S",
                    help="side of the square pedestrian crops (RGB and class-tag mask) in pixels")
+    p.add_argument("--crop-box", default=CONVERT["crop_box"], choices=CROP_BOXES,
+                   help="what the crop box is made from: mask (the segmentation mask's box, "
+                        "what a detector could see; frames without a pedestrian pixel get no "
+                        "crop and are reported as fully occluded), mask+joints (union with the "
+                        "ground-truth joint box: an upper bound) or joints")
+    p.add_argument("--crop-context", type=float, default=CONVERT["crop_context"], metavar="F",
+                   help="also store the crop box widened F times about its centre "
+                        "(frames/context_rgb), from which box noise is cut; 1 = none")
     p.add_argument("--skip-bad-media", action="store_true",
                    help="leave out recordings whose MP4 or APNG is missing or broken (listed in "
                         "the summary) instead of failing")
@@ -143,6 +151,7 @@ def _convert_cli(args, client) -> int:
                 seed=args.seed, balance=args.balance, threads=args.threads, verify=args.verify,
                 compress=args.compress, media=not args.no_media, crop_size=args.crop_size,
                 skip_bad_media=args.skip_bad_media, force=args.force,
+                crop_box=args.crop_box, crop_context=args.crop_context,
                 progress=False if args.quiet else None, strict=args.strict, client=client,
                 shards=args.shards)
     except FileExistsError as exc:

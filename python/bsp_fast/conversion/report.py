@@ -112,6 +112,13 @@ def format_report(r: dict) -> str:
                      f"test {fr['test']}), {sec.get('media', 0):.2f} s, "
                      f"{media['crops_per_second']:,.0f} crops/s, "
                      f"{len(media['bad'])} bad media files left out")
+        occ = media.get("fully_occluded")
+        if occ is not None:
+            lines.append(f"media: {sum(occ.values())} frames without a pedestrian pixel "
+                         f"(fully occluded: train {occ['train']}, val {occ['val']}, "
+                         f"test {occ['test']})"
+                         + ("; no crop under --crop-box mask"
+                            if r.get("settings", {}).get("crop_box") == "mask" else ""))
         for path, why in media["bad"][:20]:
             lines.append(f"  left out {path}: {why}")
     for rec, why in r["skipped"][:20]:

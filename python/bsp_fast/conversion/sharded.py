@@ -151,6 +151,8 @@ def _merge(reports: list, passes: int, shards: int, seconds: float) -> dict:
     media = dict(report["media"])
     media["frames"] = {s: sum(r["media"]["frames"][s] for r in reports)
                        for s in ("train", "val", "test")}
+    media["fully_occluded"] = {s: sum(r["media"]["fully_occluded"][s] for r in reports)
+                               for s in ("train", "val", "test")}
     media["passes"] = passes
     media["check_seconds"] = max(r["media"]["check_seconds"] for r in reports)
     media["seconds"] = max(r["media"]["seconds"] for r in reports)

@@ -141,9 +141,16 @@ def part_name(k: int) -> str:
     return f"part-{k:05d}.h5"
 
 
-def _copy_attrs(src, dst) -> None:
-    for name in src.attrs:
-        dst.attrs.create(name, src.attrs[name], dtype=src.attrs.get_id(name).dtype)
+#: Attributes that count a shard's part: the virtual file holds their sum over the shards.
+SUMMED_ATTRS = ("fully_occluded_frames",)
+
+
+def _copy_attrs(src, dst, parts=(), name="/") -> None:
+    for key in src.attrs:
+        value = src.attrs[key]
+        if key in SUMMED_ATTRS and parts:
+            value = sum(p[name].attrs[key] for p in parts)
+        dst.attrs.create(key, value, dtype=src.attrs.get_id(key).dtype)
 
 
 def write_virtual(path: Path, folder: Path, rel_folder: str, count: int) -> None:
@@ -162,7 +169,7 @@ def write_virtual(path: Path, folder: Path, rel_folder: str, count: int) -> None
             for name in names:
                 obj = first[name]
                 if isinstance(obj, h5py.Group):
-                    _copy_attrs(obj, out.require_group(name))
+                    _copy_attrs(obj, out.require_group(name), parts, name)
                     continue
                 pieces = [p[name] for p in parts]
                 total = sum(d.shape[0] for d in pieces)

@@ -22,7 +22,7 @@ import time
 import zlib
 from pathlib import Path
 
-__all__ = ["default_cache_dir", "cache_name", "stale_reason", "crc32_file", "describe_difference",
+__all__ = ["file_crop_box", "default_cache_dir", "cache_name", "stale_reason", "crc32_file", "describe_difference",
            "cache_entries", "cache_usage", "mark_used", "last_used", "prune", "format_bytes", "parse_bytes", "CACHE_GLOB"]
 
 #: The converted files of a cache folder (cache_name's pattern).
@@ -85,6 +85,16 @@ def stale_reason(h5_path: Path, settings: dict, csv: Path) -> str | None:
     if st.st_mtime_ns > Path(h5_path).stat().st_mtime_ns and crc32_file(csv) != crc & 0xFFFFFFFF:
         return f"{csv} changed (CRC-32 differs)"
     return None
+
+
+def file_crop_box(attrs) -> str | None:
+    """The crop-box policy of a converted file from its root attributes: ``crop_box``;
+    ``mask+joints`` for a file with media written before the attribute existed (the only
+    policy then); None without media."""
+    if not int(attrs.get("media", 0)):
+        return None
+    value = attrs.get("crop_box", "mask+joints")
+    return value.decode() if isinstance(value, bytes) else str(value)
 
 
 # ---------------------------------------------------------------------- messages

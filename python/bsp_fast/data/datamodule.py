@@ -11,8 +11,9 @@ import sys
 from pathlib import Path
 
 from .. import conversion
-from ..defaults import CONVERT as DEFAULTS
+from ..defaults import CONVERT as DEFAULTS, POSE_CROP_CONTEXT
 from . import cache as _cache
+from .cache import file_crop_box
 from .datasets import DEFAULT_EVAL_SEED, SPLITS, TASKS, ClipDataset
 
 try:
@@ -104,6 +105,8 @@ class BSPDataModule(_Base):
         self.convert_options = dict(convert_options or {})
         # media crops cost decoding time and space; only pose estimation reads them
         self.convert_options.setdefault("media", task == "pose_estimation")
+        if task == "pose_estimation":  # box noise is cut out of the wider context crops
+            self.convert_options.setdefault("crop_context", POSE_CROP_CONTEXT)
         self._given_h5 = h5_path is not None
         self._h5 = Path(h5_path) if h5_path is not None else None
         self.cache_dir = Path(cache_dir) if cache_dir is not None else None
@@ -247,7 +250,8 @@ class BSPDataModule(_Base):
         a = ds.attrs
         checks = [("clip_length", self._explicit["clip_length"], a.get("clip_length")),
                   ("clip_offset", self._explicit["clip_offset"], a.get("clip_stride")),
-                  ("benchmark", self.benchmark_windows or None, bool(a.get("benchmark", 0)))]
+                  ("benchmark", self.benchmark_windows or None, bool(a.get("benchmark", 0))),
+                  ("crop_box", self.convert_options.get("crop_box"), file_crop_box(a))]
         wanted, stored = {}, {}
         for name, want, have in checks:
             if want is not None and have is not None and want != type(want)(have):
@@ -281,7 +285,12 @@ class BSPDataModule(_Base):
             options["augment"] = self.augment and train
         if self.task == "pose_estimation":
             options.pop("noise"), options.pop("mjp")
-        options.update(self.dataset_options)
+        extra = dict(self.dataset_options)
+        # box_jitter: the train split's box noise; box_noise: val and test (evaluation)
+        jitter, noise = extra.pop("box_jitter", None), extra.pop("box_noise", None)
+        if (jitter if train else noise):
+            options["box_noise"] = tuple(jitter if train else noise)
+        options.update(extra)
         return ClipDataset(self.h5_path, split, self.task, **options)
 
     def _loader(self, split: str):

@@ -30,6 +30,7 @@ AUGMENTED_TASKS = ("classification", "autoencoder")  # 2D flips/rotations; image
 _META_STR = ("video_id", "pedestrian_id", "age", "gender")
 _META_INT = ("clip_id", "start_frame", "end_frame")
 MEDIA_DATASETS = ("frames/rgb", "frames/crop_box", "frames/joint_visible", "clip_frames")
+CONTEXT_DATASETS = ("frames/context_rgb", "frames/context_box")
 
 
 def _rotation_matrices(pyr: np.ndarray) -> np.ndarray:
@@ -63,6 +64,11 @@ class ClipDataset(SplitDataset):
     crops (``pose_estimation``). ``indices`` restricts the split to those stored rows.
     ``transform``/``target_transform`` are called on each sample's ``inputs``/``targets``
     tensor (torchvision style; crops channels first) after everything else.
+    ``box_noise=(scale, shift)`` (``pose_estimation``) perturbs each frame's crop box like
+    a detector would (:class:`~bsp_fast.data.images.BoxNoise`) and cuts the crop out of
+    the stored context crop (a file converted with ``crop_context``; docs/data.md, "Box
+    noise"): train boxes change every epoch, val/test boxes are fixed per clip by
+    ``seed``, whatever the batch size.
     """
 
     def __init__(self, h5_path, split: str = "train", task: str = "classification", *,
@@ -71,7 +77,8 @@ class ClipDataset(SplitDataset):
                  lifting_target: str = "absolute", with_mask: bool = False,
                  with_pixels: bool = False, indices=None, image_dtype: str = "uint8",
                  mean=None, std=None, image_scale: float = 0.1, image_shift: float = 0.05,
-                 color_jitter: float = 0.2, transform=None, target_transform=None):
+                 color_jitter: float = 0.2, transform=None, target_transform=None,
+                 box_noise=None):
         choice("task", task, TASKS)
         choice("lifting_target", lifting_target, LIFTING_TARGETS)
         self._init_common(h5_path, split, seed, transform, target_transform)
@@ -93,6 +100,9 @@ class ClipDataset(SplitDataset):
         if task != "pose_estimation" and (self.image_dtype != "uint8" or self.mean is not None):
             raise ValueError("image_dtype/mean/std apply to pose_estimation crops only")
         self.augment = bool(augment)
+        self.box_noise = I.BoxNoise(*(box_noise or (0.0, 0.0)))
+        if self.box_noise and task != "pose_estimation":
+            raise ValueError("box_noise perturbs the crop boxes of pose_estimation only")
         if task == "pose_estimation":
             self._augment = I.ImageAugment(flip_p, image_scale, image_shift, color_jitter)
         else:
@@ -131,6 +141,18 @@ class ClipDataset(SplitDataset):
         if rows.ndim != 1 or (len(rows) and (rows.min() < 0 or rows.max() >= n)):
             raise ValueError(f"indices must be a 1-D list of rows in [0, {n}) of /{self.split}")
         self._rows = self._balanced(rows) if balance else rows
+        self._check_context()
+
+    def _check_context(self) -> None:
+        if not self.box_noise:
+            return
+        ctx = float(self.attrs.get("crop_context", 1.0))
+        need = 1 + self.box_noise.scale + 2 * self.box_noise.shift
+        if ctx < need:
+            raise ValueError(
+                f"{self.h5_path}: box noise {self.box_noise} reaches {need:g} times the crop "
+                f"box, past the stored context (crop_context {ctx:g}); convert with "
+                f"--crop-context {need:g} or more (BSPDataModule uses 1.25 for pose_estimation)")
 
     def _required(self) -> list:
         names = ["projection_2d", "labels", "targets/frame_idx", "meta/clip_width"]
@@ -142,6 +164,7 @@ class ClipDataset(SplitDataset):
                 names.append("meta/camera_transform")
         if self.task == "pose_estimation":
             names += list(MEDIA_DATASETS) + (["frames/mask"] if self.with_mask else [])
+            names += list(CONTEXT_DATASETS) if self.box_noise else []
         return names
 
     def _balanced(self, rows: np.ndarray) -> np.ndarray:
@@ -172,7 +195,7 @@ class ClipDataset(SplitDataset):
     def _arrays(self, pos, rows, rng) -> tuple:
         reader = Rows(rows)
         if self.task == "pose_estimation":
-            out, channels_last = self._pose_estimation(reader, rng)
+            out, channels_last = self._pose_estimation(reader, rows, rng)
         else:
             out, channels_last = self._from_2d(reader, rows, rng), False
         out["label"] = self._labels[rows]
@@ -212,7 +235,7 @@ class ClipDataset(SplitDataset):
         t, shift, scale = T.normalize_hips_neck_3d(metres)
         return dict(targets=t, targets_m=metres, target_shift=shift, target_scale=scale)
 
-    def _pose_estimation(self, reader: Rows, rng) -> tuple:
+    def _pose_estimation(self, reader: Rows, rows, rng) -> tuple:
         frames = reader.read(self._dataset("clip_frames"))
         freader = Rows(frames.reshape(-1))
         rgb = freader.read(self._dataset("frames/rgb"))
@@ -224,10 +247,32 @@ class ClipDataset(SplitDataset):
         vis = freader.read(self._dataset("frames/joint_visible")).reshape(B, L, -1) != 0
         mask = (freader.read(self._dataset("frames/mask")).reshape((B, L, S, S))
                 if self.with_mask else None)
+        if self.box_noise:
+            rgb, box = self._noisy_crops(freader, rgb, box, rows, rng)
         out, channels_last = pose_crops(rgb, box, pixels, vis, mask, self, rng)
         if self.with_pixels:
             out["pixels"] = pixels
         return out, channels_last
+
+    def _noisy_crops(self, freader: Rows, rgb, box, rows, rng) -> tuple:
+        """``box_noise``: noisy boxes (train: from the batch's generator; val/test: one
+        generator per stored clip row) and their crops cut from the context crops."""
+        B, L = box.shape[:2]
+        if self.split == "train":
+            new = self.box_noise(box, rng)
+        else:
+            new = np.stack([self.box_noise(box[i], np.random.default_rng(
+                [self._seed, 0xB0C5, int(r)])) for i, r in enumerate(rows)])
+        moved = np.isfinite(box).all(-1) & (new != box).any(-1)
+        if not moved.any():
+            return rgb, box
+        S = rgb.shape[2]
+        ctx = freader.read(self._dataset("frames/context_rgb"))
+        cbox = freader.read(self._dataset("frames/context_box")).reshape(B, L, 4)
+        rgb = np.array(rgb, copy=True)
+        rgb[moved] = I.recrop(ctx.reshape((B, L) + ctx.shape[1:])[moved], cbox[moved],
+                              new[moved], S)
+        return rgb, np.where(moved[..., None], new, box).astype(np.float32)
 
 
 def pose_crops(rgb, box, pixels, vis, mask, ds, rng) -> tuple:

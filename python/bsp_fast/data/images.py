@@ -16,7 +16,8 @@ import torch.nn.functional as F  # noqa: E402
 
 from .. import skeleton as _sk
 
-__all__ = ["IMAGE_DTYPES", "ImageAugment", "to_float_images", "check_image_options"]
+__all__ = ["IMAGE_DTYPES", "ImageAugment", "to_float_images", "check_image_options",
+           "BoxNoise", "recrop"]
 
 IMAGE_DTYPES = ("uint8", "float32")
 _FLIP = np.asarray(_sk.FLIP_PERMUTATION, dtype=np.intp)
@@ -126,3 +127,51 @@ def _jitter(x: torch.Tensor, f: torch.Tensor) -> torch.Tensor:
     grey = (x * w).sum(1, keepdim=True)
     x = grey + (x - grey) * f[:, 2].view(-1, 1, 1, 1)
     return x.clamp_(0, 255)
+
+
+class BoxNoise:
+    """Detector-like errors of a crop box: its side times a factor uniform in
+    ``[1 - scale, 1 + scale]`` and its centre moved by ``[-shift, shift]`` times the
+    (original) side per axis, independently per frame (docs/data.md, "Box noise").
+    ``BoxNoise(0.1, 0.05)`` is the evaluation's stated size. Boxes are ``(..., 4)``
+    ``[u0, v0, u1, v1]`` squares in image pixels; NaN boxes (no crop) stay NaN."""
+
+    def __init__(self, scale: float = 0.0, shift: float = 0.0):
+        for name, v, hi in (("scale", scale, 0.5), ("shift", shift, 0.5)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= hi:
+                raise ValueError(f"box noise {name} must lie in [0, {hi}], got {v!r}")
+        self.scale, self.shift = float(scale), float(shift)
+
+    def __bool__(self) -> bool:
+        return self.scale > 0 or self.shift > 0
+
+    def __repr__(self) -> str:
+        return f"BoxNoise(scale={self.scale}, shift={self.shift})"
+
+    def __call__(self, boxes, rng: np.random.Generator) -> np.ndarray:
+        """Noisy copies of ``boxes`` (float64), drawn from ``rng`` (3 uniforms per box, in
+        box order: scale, shift u, shift v)."""
+        b = np.asarray(boxes, np.float64)
+        u = rng.uniform(-1.0, 1.0, b.shape[:-1] + (3,))
+        side = b[..., 2] - b[..., 0]
+        centre = (b[..., :2] + b[..., 2:]) / 2 + u[..., 1:] * self.shift * side[..., None]
+        half = side * (1 + u[..., 0] * self.scale) / 2
+        return np.concatenate([centre - half[..., None], centre + half[..., None]], -1)
+
+
+def recrop(context, context_box, boxes, size: int) -> np.ndarray:
+    """Cuts ``boxes`` ``(N, 4)`` (image pixels, any real square) out of the stored context
+    crops ``context`` ``(N, C, C, 3)`` uint8 whose boxes are ``context_box`` ``(N, 4)``:
+    bilinear resampling to ``size`` x ``size``, zeros outside the context (as outside the
+    image). Returns ``(N, size, size, 3)`` uint8."""
+    c = torch.from_numpy(np.ascontiguousarray(context)).permute(0, 3, 1, 2).float()
+    cb = torch.as_tensor(np.asarray(context_box, np.float64))
+    b = torch.as_tensor(np.asarray(boxes, np.float64))
+    # output pixel centre (i + 0.5) / size of the box -> image -> context pixels -> [-1, 1]
+    t = (torch.arange(size, dtype=torch.float64) + 0.5) / size
+    side, cside = b[:, 2] - b[:, 0], cb[:, 2] - cb[:, 0]
+    x = (b[:, :1] + t * side[:, None] - cb[:, :1]) / cside[:, None] * 2 - 1  # (N, size)
+    y = (b[:, 1:2] + t * side[:, None] - cb[:, 1:2]) / cside[:, None] * 2 - 1
+    grid = torch.stack([x[:, None, :].expand(-1, size, -1), y[:, :, None].expand(-1, -1, size)], -1)
+    out = F.grid_sample(c, grid.float(), mode="bilinear", padding_mode="zeros", align_corners=False)
+    return out.round_().clamp_(0, 255).to(torch.uint8).permute(0, 2, 3, 1).numpy()

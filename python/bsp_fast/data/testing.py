@@ -200,6 +200,9 @@ def write_clip_file(path, clips=(96, 24, 24), clip_length: int = 8, clip_offset:
             info["class_counts"][split] = counts.tolist()
             f.attrs[f"class_counts_{split}"] = counts.astype(np.int64)
         _root_attrs(f, L, stride, seed)
+        f.attrs["media"] = int(media)
+        if media:  # crops around the encoded joints, like bsp-convert's mask boxes
+            f.attrs["crop_size"], f.attrs["crop_box"] = int(crop_size), "mask"
     return info
 
 

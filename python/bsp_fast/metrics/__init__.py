@@ -20,17 +20,17 @@ from .classification import (
     predicted_labels,
     recall,
 )
-from .pose2d import PCKCounts, masked_mse, missing_joint_ratio, pck, pck_counts
+from .pose2d import PCKCounts, masked_mse, missing_joint_ratio, pck, pck_counts, pck_per_joint
 from .pose3d import denormalise_lifting, mpjpe, mpjve, n_mpjpe, pa_mpjpe, root_align
 from .threshold_free import auroc, average_precision, pck_auc, pck_curve
 
 _STREAMING = ("ClassificationMetrics", "BinaryF1Score", "BinaryPrecision", "BinaryRecall",
               "BinaryAccuracy", "classification_collection", "PCK", "MPJPE", "NMPJPE", "PAMPJPE", "MPJVE",
-              "MaskedMSE", "MissingJointRatio")
+              "MaskedMSE", "MissingJointRatio", "PCKPerJoint", "FrameCount")
 
 __all__ = [
     "f1_score", "precision", "recall", "accuracy", "confusion_matrix", "confusion_counts",
-    "predicted_labels", "pck", "pck_counts", "PCKCounts", "missing_joint_ratio",
+    "predicted_labels", "pck", "pck_counts", "pck_per_joint", "PCKCounts", "missing_joint_ratio",
     "masked_mse", "mpjpe", "n_mpjpe", "pa_mpjpe", "mpjve", "root_align",
     "denormalise_lifting", "auroc", "average_precision", "pck_curve", "pck_auc", *_STREAMING,
 ]

@@ -15,10 +15,12 @@ import numpy as np
 from ..skeleton import HIPS, NECK, NUM_JOINTS
 from ._arrays import Kind, check_pair, check_points, expect, ratio, shape_of
 
-__all__ = ["pck", "pck_counts", "PCKCounts", "missing_joint_ratio", "masked_mse",
-           "missing_joint_ratio_sums", "masked_mse_sums", "NORMS", "MIN_NORMALISER"]
+__all__ = ["pck", "pck_counts", "PCKCounts", "pck_per_joint", "missing_joint_ratio",
+           "masked_mse", "missing_joint_ratio_sums", "masked_mse_sums", "NORMS", "ALIGNS",
+           "MIN_NORMALISER"]
 
 NORMS = ("bbox", "hips_neck")
+ALIGNS = (None, "hips")
 MIN_NORMALISER = 1e-5
 POSES2D = f"(..., {NUM_JOINTS}, 2) in pixels"
 
@@ -36,21 +38,25 @@ class PCKCounts(NamedTuple):
         return self.correct / self.total if self.total else float("nan")
 
 
-def _check_options(alpha, norm) -> None:
+def _check_options(alpha, norm, align=None) -> None:
     if norm not in NORMS:
         raise ValueError(f"norm must be one of {NORMS}, got {norm!r}")
+    if align not in ALIGNS:
+        raise ValueError(f"align must be one of {ALIGNS}, got {align!r}")
     if not (np.isscalar(alpha) and np.isfinite(alpha) and alpha > 0):
         raise ValueError(f"alpha must be a finite number > 0, got {alpha!r}")
 
 
-def _pck_terms(pred, gt, alpha, norm, visible):
-    """(correct, total, frames, skipped) as arrays/tensors of the inputs' kind."""
-    _check_options(alpha, norm)
+def _pck_terms(pred, gt, alpha, norm, visible, select=None, align=None, per_joint=False):
+    """(correct, total, frames, skipped) as arrays/tensors of the inputs' kind; with
+    ``per_joint`` correct and total are ``(26,)``."""
+    _check_options(alpha, norm, align)
     s = check_pair(pred, gt, 2, POSES2D, joints=NUM_JOINTS)
-    if visible is not None:
-        expect(shape_of(visible) == s[:-1], "visible", f"{s[:-1]} (bool, ..., {NUM_JOINTS})",
-               f"shape {shape_of(visible)}")
-    kind = Kind(pred, gt, visible)
+    for name, m in (("visible", visible), ("select", select)):
+        if m is not None:
+            expect(shape_of(m) == s[:-1], name, f"{s[:-1]} (bool, ..., {NUM_JOINTS})",
+                   f"shape {shape_of(m)}")
+    kind = Kind(pred, gt, visible, select)
     xp = kind.xp
     p, g = kind.f64(pred), kind.f64(gt)
     present = ((g[..., 0] != 0) | (g[..., 1] != 0)) if visible is None else kind.boolean(visible)
@@ -70,20 +76,43 @@ def _pck_terms(pred, gt, alpha, norm, visible):
         size = xp.where(present[..., NECK], xp.sqrt((d * d).sum(-1)), float("nan"))
     scored = size >= MIN_NORMALISER  # False for NaN
     counted = present & scored[..., None]
+    if select is not None:
+        counted = counted & kind.boolean(select)
+    if align == "hips":  # the prediction's hips onto the true hips; the hips then say nothing
+        p = p - p[..., HIPS:HIPS + 1, :] + g[..., HIPS:HIPS + 1, :]
+        not_hips = xp.ones_like(counted)
+        not_hips[..., HIPS] = False
+        counted = counted & not_hips
     e = p - g
     hit = xp.sqrt((e * e).sum(-1)) <= alpha * size[..., None]
-    correct = (hit & counted).sum()
     frames = scored.sum()
+    if per_joint:
+        return ((hit & counted).reshape(-1, NUM_JOINTS).sum(0),
+                counted.reshape(-1, NUM_JOINTS).sum(0), frames, int(np.prod(s[:-2])) - frames)
+    correct = (hit & counted).sum()
     return correct, counted.sum(), frames, int(np.prod(s[:-2])) - frames
 
 
 def pck_counts(pred, gt, *, alpha: float = 0.05, norm: str = "bbox",
-               visible=None) -> PCKCounts:
+               visible=None, select=None, align=None) -> PCKCounts:
     """The counts behind :func:`pck` (correct, total, frames scored, frames skipped)."""
-    return PCKCounts(*(int(v) for v in _pck_terms(pred, gt, alpha, norm, visible)))
+    return PCKCounts(*(int(v) for v in _pck_terms(pred, gt, alpha, norm, visible, select,
+                                                  align)))
 
 
-def pck(pred, gt, *, alpha: float = 0.05, norm: str = "bbox", visible=None):
+def pck_per_joint(pred, gt, *, alpha: float = 0.05, norm: str = "bbox", visible=None,
+                  select=None, align=None) -> np.ndarray:
+    """PCK of each of the 26 joints (``(26,)`` float64 NumPy, NaN where a joint is never
+    counted), with :func:`pck`'s rules."""
+    kind = Kind(pred, gt, visible, select)
+    correct, total, _, _ = _pck_terms(pred, gt, alpha, norm, visible, select, align, True)
+    c, t = (np.asarray(x.cpu() if kind.torch else x, np.float64) for x in (correct, total))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(t > 0, c / np.maximum(t, 1), np.nan)
+
+
+def pck(pred, gt, *, alpha: float = 0.05, norm: str = "bbox", visible=None, select=None,
+        align=None):
     """Percentage of correct keypoints, as a fraction in [0, 1].
 
     A counted joint is correct when ``|pred_j - gt_j| <= alpha * S``; S is the diagonal
@@ -91,10 +120,14 @@ def pck(pred, gt, *, alpha: float = 0.05, norm: str = "bbox", visible=None):
     or ``|gt_neck - gt_hips|`` (``norm="hips_neck"``, PCKhn@0.1; a frame whose neck is
     absent is left out). ``pred``/``gt`` are ``(..., 26, 2)`` pixels, ``visible``
     ``(..., 26)`` bool marks the ground-truth joints present (default: not ``(0, 0)``).
+    ``select`` ``(..., 26)`` bool counts only those of the present joints (the normaliser
+    still comes from every present joint): e.g. the visible or the occluded ones.
+    ``align="hips"`` translates the prediction so its hips lie on the true hips before
+    comparing (the report's hips-aligned protocol); the hips are then not counted.
     NaN when no joint is counted; see :func:`pck_counts` for skipped frames.
     """
-    kind = Kind(pred, gt, visible)
-    correct, total, _, _ = _pck_terms(pred, gt, alpha, norm, visible)
+    kind = Kind(pred, gt, visible, select)
+    correct, total, _, _ = _pck_terms(pred, gt, alpha, norm, visible, select, align)
     return ratio(kind, correct, total)
 
 

@@ -19,7 +19,7 @@ from . import pose3d as _p3
 
 __all__ = ["ClassificationMetrics", "BinaryF1Score", "BinaryPrecision", "BinaryRecall",
            "BinaryAccuracy", "classification_collection", "PCK", "MPJPE", "NMPJPE", "PAMPJPE", "MPJVE",
-           "MaskedMSE", "MissingJointRatio"]
+           "MaskedMSE", "MissingJointRatio", "PCKPerJoint", "FrameCount"]
 
 
 def _accumulate(metric: Metric, name: str, value) -> None:
@@ -102,15 +102,15 @@ class PCK(Metric):
     higher_is_better = True
     full_state_update = False
 
-    def __init__(self, alpha: float = 0.05, norm: str = "bbox", **kwargs):
-        _p2._check_options(alpha, norm)
+    def __init__(self, alpha: float = 0.05, norm: str = "bbox", align=None, **kwargs):
+        _p2._check_options(alpha, norm, align)
         super().__init__(**kwargs)
-        self.alpha, self.norm = float(alpha), norm
+        self.alpha, self.norm, self.align = float(alpha), norm, align
         for name in ("correct", "joints", "frames", "skipped"):
             self.add_state(name, torch.tensor(0, dtype=torch.int64), dist_reduce_fx="sum")
 
-    def update(self, pred, gt, visible=None) -> None:
-        terms = _p2._pck_terms(pred, gt, self.alpha, self.norm, visible)
+    def update(self, pred, gt, visible=None, select=None) -> None:
+        terms = _p2._pck_terms(pred, gt, self.alpha, self.norm, visible, select, self.align)
         for name, value in zip(("correct", "joints", "frames", "skipped"), terms):
             _accumulate(self, name, value)
 
@@ -126,6 +126,53 @@ class PCK(Metric):
     @property
     def scored_frames(self) -> int:
         return int(self.frames)
+
+
+class PCKPerJoint(Metric):
+    """Streaming :func:`~bsp_fast.metrics.pck_per_joint`: ``compute()`` -> ``{f"{prefix}
+    {joint name}": fraction}`` for the 26 CARLA joints (NaN for a joint never counted)."""
+
+    is_differentiable = False
+    higher_is_better = True
+    full_state_update = False
+
+    def __init__(self, alpha: float = 0.05, norm: str = "bbox", prefix: str = "pck_0.05/",
+                 **kwargs):
+        _p2._check_options(alpha, norm)
+        super().__init__(**kwargs)
+        self.alpha, self.norm, self.prefix = float(alpha), norm, prefix
+        for name in ("correct", "joints"):
+            self.add_state(name, torch.zeros(26, dtype=torch.int64), dist_reduce_fx="sum")
+
+    def update(self, pred, gt, visible=None, select=None) -> None:
+        c, t, _, _ = _p2._pck_terms(pred, gt, self.alpha, self.norm, visible, select,
+                                    per_joint=True)
+        self.correct += c.to(self.correct.device)
+        self.joints += t.to(self.joints.device)
+
+    def compute(self) -> dict:
+        from ..skeleton import JOINT_NAMES
+
+        value = self.correct.to(torch.float64) / self.joints.clamp_min(1)
+        value = torch.where(self.joints > 0, value, torch.nan)
+        return {f"{self.prefix}{n}": value[j] for j, n in enumerate(JOINT_NAMES)}
+
+
+class FrameCount(Metric):
+    """A count of frames: ``update(mask)`` adds ``mask.sum()``; ``compute()`` -> float."""
+
+    is_differentiable = False
+    full_state_update = False
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.add_state("count", torch.tensor(0, dtype=torch.int64), dist_reduce_fx="sum")
+
+    def update(self, mask) -> None:
+        self.count += mask.sum().to(self.count.device)
+
+    def compute(self) -> torch.Tensor:
+        return self.count.to(torch.float64)
 
 
 class _Confusion(Metric):

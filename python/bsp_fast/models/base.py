@@ -243,9 +243,12 @@ class PoseEstimationModel(BaseModel):
 
 
 def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask=None) -> torch.Tensor:
-    """Mean squared error over the coordinates of the joints where ``mask (..., J)``."""
+    """Mean squared error over the coordinates of the joints where ``mask (..., J)``;
+    masked-out joints reach neither the value nor the gradient, even when NaN (a frame
+    without a crop has NaN targets)."""
     err = (pred - target).pow(2).sum(-1)
     if mask is None:
         return err.mean() / pred.shape[-1]
-    m = mask.to(err.dtype)
-    return (err * m).sum() / (m.sum() * pred.shape[-1]).clamp_min(1)
+    keep = mask.bool()
+    err = torch.where(keep, err, torch.zeros((), dtype=err.dtype, device=err.device))
+    return err.sum() / (keep.sum() * pred.shape[-1]).clamp_min(1)

@@ -115,9 +115,10 @@ class MeanCropSkeleton(_Trivial, PoseEstimationModel):
             self.crop_size = int(batch["inputs"].shape[-1])
         t = batch["targets"].double()
         vis = batch.get("visible")
-        m = torch.ones(t.shape[:-1], dtype=torch.float64) if vis is None else vis.double()
-        self.total += (t * m.unsqueeze(-1)).sum(dim=(0, 1))
-        self.count += m.sum(dim=(0, 1))
+        m = torch.ones(t.shape[:-1], dtype=torch.bool) if vis is None else vis.bool()
+        m = m & torch.isfinite(t).all(-1)  # a frame without a crop has NaN targets
+        self.total += torch.where(m.unsqueeze(-1), t, 0.0).sum(dim=(0, 1))
+        self.count += m.double().sum(dim=(0, 1))
 
     def _finish(self):
         self.pose.copy_((self.total / self.count.clamp_min(1).unsqueeze(-1)).float())

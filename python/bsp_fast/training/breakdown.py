@@ -40,7 +40,11 @@ def ratio_terms(metrics: TaskMetrics) -> dict:
     for name, m in metrics.scores.items():
         if not m.update_count:
             continue
+        if any(torch.is_tensor(v) and v.numel() != 1 for v in m.metric_state.values()):
+            continue  # per-joint PCK: not a ratio per recording
         st = {k: float(v) for k, v in m.metric_state.items()}
+        if set(st) == {"count"}:  # a plain count (fully occluded frames)
+            continue
         key = name.replace("_0_", "_0.")
         if name == "cls":
             tp, fp, fn, tn = st["tp"], st["fp"], st["fn"], st["tn"]

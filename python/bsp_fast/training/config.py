@@ -119,6 +119,11 @@ OPTIONS: tuple = (
        "comma-separated values (one per joint)", "data", metavar="P[,P...]"),
     _o("augment", "bool", True, "random flips and rotations of the train clips "
        "(classification and autoencoder only)", "data"),
+    _o("box_jitter_scale", "float", 0.0, "pose_estimation: train-time box jitter, crop-box "
+       "side x U[1-S, 1+S], re-cut from the stored context crops (0: off)", "data",
+       minimum=0.0, metavar="S"),
+    _o("box_jitter_shift", "float", 0.0, "pose_estimation: train-time box jitter, centre "
+       "moved by U[-T, T] x side per axis (0: off)", "data", minimum=0.0, metavar="T"),
     _o("lifting_target", "str", "absolute", "3D frame of the lifting targets", "data",
        choices=LIFTING_TARGETS),
     # ------------------------------------------------------------------ model

@@ -91,11 +91,14 @@ def prepare_scoring(cfg: dict, module) -> str:
 def evaluate(run, split: str = "test", data=None, *, which: str = "best",
              batch_size: int | None = None, workers: int | None = None,
              accelerator: str | None = None, noise: float | None = None, mjp=None,
-             limit_batches: int | None = None, quiet: bool = True) -> EvalResult:
+             limit_batches: int | None = None, quiet: bool = True,
+             box_noise=None) -> EvalResult:
     """Scores the ``which`` checkpoint (best or last) of run directory or checkpoint
     ``run`` on ``split`` (test or val) with the run's data settings (same batch size, so
     the same fixed evaluation noise), any of them overridable; reproduces the run's
-    ``metrics.json``."""
+    ``metrics.json``. ``box_noise=(scale, shift)`` (pose_estimation) scores the crops of
+    noisy boxes instead: side x U[1 - scale, 1 + scale], centre moved by U[-shift, shift]
+    x side per axis, fixed per clip by the evaluation seed (docs/data.md, "Box noise")."""
     if split not in SPLIT_STAGES:
         raise ValueError(f"split must be one of {list(SPLIT_STAGES)}, got {split!r}")
     from .train import make_datamodule, make_trainer, prepare_data
@@ -105,6 +108,11 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
                                      limit_batches=limit_batches, quiet=quiet)
     precision = prepare_scoring(cfg, module)
     dm = make_datamodule(cfg, h5)
+    if box_noise is not None:
+        if module.task != "pose_estimation":
+            raise ValueError(f"box noise perturbs pose-estimation crop boxes; this is a "
+                             f"{module.task} run")
+        dm.dataset_options["box_noise"] = tuple(float(x) for x in box_noise)
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
     trainer = make_trainer(cfg, None, precision, fit=False)
     if split == "test":
@@ -114,6 +122,17 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
     metrics = dict(module.results.get(split, {}))
     return EvalResult(task=module.task, model=module.hparams["model"], split=split,
                       metrics=metrics, checkpoint=Path(ckpt), config=cfg)
+
+
+def _box_noise(text: str) -> tuple:
+    try:
+        scale, shift = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected SCALE,SHIFT (e.g. 0.1,0.05), got {text!r}") \
+            from None
+    if not (0 <= scale <= 0.5 and 0 <= shift <= 0.5):
+        raise argparse.ArgumentTypeError(f"SCALE and SHIFT must lie in [0, 0.5], got {text!r}")
+    return scale, shift
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -148,6 +167,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="override the run's missing-joint probability (1 or 26 values)")
     p.add_argument("--limit-batches", type=int, default=None, metavar="N",
                    help="evaluate at most N batches (default: the run's setting)")
+    p.add_argument("--box-noise", default=None, metavar="SCALE,SHIFT", type=_box_noise,
+                   help="pose_estimation: score crops of noisy boxes, side x U[1-SCALE, "
+                        "1+SCALE] and centre moved by U[-SHIFT, SHIFT] x side (e.g. 0.1,0.05), "
+                        "seeded per clip; needs a file with context crops")
     p.add_argument("--json", default=None, metavar="FILE", help="also write the metrics here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -166,7 +189,8 @@ def main(argv=None) -> int:
         res = evaluate(args.runs[0], args.split, args.data, which=args.which,
                        batch_size=args.batch_size, workers=args.workers,
                        accelerator=args.accelerator, noise=args.noise, mjp=args.mjp,
-                       limit_batches=args.limit_batches, quiet=args.quiet)
+                       limit_batches=args.limit_batches, quiet=args.quiet,
+                       box_noise=args.box_noise)
     except (C.ConfigError, ValueError) as exc:
         print(f"bsp-eval: {exc}", file=sys.stderr)
         return 2

@@ -21,7 +21,8 @@ from ..atomic import write_text
 from .runs import RunError, read_run, resumable
 from .findings import NA, NO, YES, evaluate_findings, format_value
 from .table_files import (BUDGETS, KINDS, RELATIONS, TABLES, experiments_dir, experiments_dirs,
-                          load_table, row_options, settings_cells, table_header, wanted_rows)
+                          load_table, prepare_row_data, row_options, settings_cells,
+                          table_header, wanted_rows)
 from .tasks.classification import constant_f1
 
 # (table files and findings live in .table_files and .findings; their names stay here)
@@ -56,6 +57,7 @@ def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrid
             run_dir = base / row["name"]
             opts = row_options(tab, row, budget, data, run_dir, overrides)
             C.validate(C.defaults() | opts)  # unknown models / hyper-parameters fail first
+            opts = prepare_row_data(tab, row, opts, convert=not dry_run)
             plan.append((row, run_dir, opts))
     results = {}
     for row, run_dir, opts in plan:
@@ -80,7 +82,9 @@ def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrid
             log(f"[{row['name']}] done in {time.perf_counter() - t0:.0f} s")
         run = read_run(run_dir)
         m = run["metrics"]
-        results[row["name"]] = {"metrics": m.get("test", {}), "initial": (m.get("initial") or {}).get("test", {}),
+        test = dict(m.get("test", {}))
+        test.update(_noisy_box_metrics(tab, run_dir, force, quiet, log))
+        results[row["name"]] = {"metrics": test, "initial": (m.get("initial") or {}).get("test", {}),
                                 "baseline": (m.get("initial") or {}).get("baseline"),
                                 "epochs": m.get("epochs"), "best_epoch": m.get("best_epoch"),
                                 "seconds": m.get("seconds", {}), "run": str(run_dir),
@@ -94,6 +98,33 @@ def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrid
                                     "seconds": {}, "run": r["run"] + " (initial metrics)",
                                     "noise": r["noise"], "mjp": r["mjp"]}
     return {"table": tab["table"], "budget": budget, "dir": str(base), "results": results}
+
+
+def _noisy_box_metrics(tab: dict, run_dir: Path, force: bool, quiet: bool, log) -> dict:
+    """A table with ``box_noise: {scale, shift}`` (pose estimation) also scores each trained
+    row's best checkpoint on the test crops of noisy boxes (``bsp-eval --box-noise``);
+    the metrics come back with the suffix ``_noisy`` and are kept in
+    ``RUN/test_box_noise.json``."""
+    spec = tab.get("box_noise")
+    if not spec:
+        return {}
+    path = run_dir / "test_box_noise.json"
+    if path.is_file() and not force:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    else:
+        from .evaluate import evaluate
+
+        noise = (float(spec["scale"]), float(spec["shift"]))
+        log(f"[{run_dir.name}] scoring the test split with noisy boxes (scale ±{noise[0]:g}, "
+            f"shift ±{noise[1]:g} of the side)")
+        try:
+            res = evaluate(run_dir, "test", box_noise=noise, quiet=quiet)
+        except (ValueError, RunError) as exc:
+            log(f"[{run_dir.name}] no noisy-box scores: {exc}")
+            return {}
+        doc = {"box_noise": {"scale": noise[0], "shift": noise[1]}, "test": res.metrics}
+        write_text(path, json.dumps(doc, indent=1))
+    return {f"{k}_noisy": v for k, v in doc["test"].items() if k != "loss"}
 
 
 # ---------------------------------------------------------------------- output

@@ -18,8 +18,8 @@ from . import config as C
 from ..atomic import publish, temp_path, write_text
 from ..defaults import SEED
 from .breakdown import FILE as BREAKDOWN
-from .table_files import BUDGETS, RULE_KEYS, check_budget_rule, load_table, row_options, \
-    wanted_rows
+from .table_files import (BUDGETS, RULE_KEYS, check_budget_rule, load_table, prepare_row_data,
+                          row_options, wanted_rows)
 from .runs import RunError, read_run, resumable
 
 __all__ = ["RULE_KEYS", "check_budget_rule", "seed_list", "reproduce_seeds", "add_options",
@@ -65,6 +65,7 @@ def _plan(tab, data, budget, base: Path, wanted, seeds, split_seeds, overrides, 
                 extra["threads"] = threads
             opts = row_options(tab, row, budget, data, run_dir, extra)
             C.validate(C.defaults() | opts)
+            opts = prepare_row_data(tab, row, opts)
             plan.append((row, seed, run_dir, opts))
     return plan
 

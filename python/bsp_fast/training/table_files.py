@@ -14,14 +14,20 @@ from pathlib import Path
 from . import config as C
 from .tasks import get_task
 
-__all__ = ["wanted_rows", "table_header", "settings_cells", "TABLES", "BUDGETS", "KINDS", "RELATIONS", "RULE_KEYS", "experiments_dirs",
-           "experiments_dir", "load_table", "row_options", "check_budget_rule", "rows_of"]
+__all__ = ["wanted_rows", "table_header", "settings_cells", "TABLES", "BUDGETS", "KINDS",
+           "RELATIONS", "RULE_KEYS", "experiments_dirs", "experiments_dir", "load_table",
+           "row_options", "check_budget_rule", "rows_of", "ROW_CROP_BOXES", "row_crop_box",
+           "prepare_row_data"]
 
 TABLES = ("lifting", "classification", "autoencoder", "pose_estimation")
 BUDGETS = ("smoke", "quick", "full")
 KINDS = ("order", "compare", "drop", "fails", "robuster", "at_least", "beats_initial")
 RELATIONS = (">", ">=", "<", "<=")
 RULE_KEYS = ("epochs", "max_steps", "early_stop", "limit_batches", "batch_size")
+#: Crop boxes a pose-estimation row may ask for (``crop_box:`` beside its options): mask
+#: boxes (the default, every row's protocol) or the union with the ground-truth joint box,
+#: only as an upper bound in a row of its own.
+ROW_CROP_BOXES = ("mask", "mask+joints")
 
 
 def check_budget_rule(tab: dict) -> None:
@@ -98,6 +104,10 @@ def load_table(table) -> dict:
                              f"from {list(doc['budgets'])}, got {extra!r}")
     if len(set(names)) != len(names):
         raise ValueError(f"{path}: duplicate row names in {names}")
+    for r in doc["rows"]:
+        if "crop_box" in r and (doc["task"] != "pose_estimation" or r["crop_box"] not in ROW_CROP_BOXES):
+            raise ValueError(f"{path}: row {r['name']!r}: crop_box {r['crop_box']!r}; a "
+                             f"pose_estimation row may ask for one of {list(ROW_CROP_BOXES)}")
     for f in doc["findings"]:
         if f.get("kind") not in KINDS:
             raise ValueError(f"{path}: finding kind {f.get('kind')!r}; allowed: {', '.join(KINDS)}")
@@ -115,6 +125,51 @@ def load_table(table) -> dict:
     doc["path"] = str(path)
     check_budget_rule(doc)
     return doc
+
+
+def row_crop_box(table: dict, row: dict) -> str | None:
+    """The crop-box policy a row's data must have: ``mask`` for every pose-estimation row
+    unless it asks for ``mask+joints`` (an upper bound); None for the other tasks."""
+    if table["task"] != "pose_estimation":
+        return None
+    return row.get("crop_box", "mask")
+
+
+def prepare_row_data(table: dict, row: dict, opts: dict, convert: bool = True) -> dict:
+    """Checks (and with ``convert`` makes) the data of one row for its crop-box policy;
+    returns ``opts`` with ``data`` pointing where the row reads.
+
+    A bsp-convert file made with another policy is refused (ValueError naming both and how
+    to convert). A dataset directory is converted by bsp-train with the default (mask
+    boxes); a row that asks for ``mask+joints`` gets its own cached conversion here, and
+    its ``data`` becomes that file."""
+    want = row_crop_box(table, row)
+    if want is None:
+        return opts
+    data = Path(opts["data"])
+    where = f"table {table['table']!r} row {row['name']!r}"
+    if data.is_file() and data.suffix in (".h5", ".hdf5"):
+        from ..conversion.vds import open_clip_file
+        from ..data.cache import file_crop_box
+
+        with open_clip_file(data) as f:
+            have = file_crop_box(f.attrs)
+        if have != want:
+            raise ValueError(
+                f"{data} was converted with --crop-box {have}, but {where} needs --crop-box "
+                f"{want} (every pose-estimation row is scored on mask-box crops; mask+joints "
+                "only in a row that asks for it as an upper bound): give the dataset "
+                f"directory, or convert again with bsp-convert DATASET OUT.h5 --crop-box {want}")
+        return opts
+    if want == "mask" or (not convert and not data.is_dir()):
+        return opts
+    from .train import make_datamodule, prepare_data
+
+    dm = make_datamodule(C.defaults() | opts)
+    dm.convert_options["crop_box"] = want
+    if convert:
+        prepare_data(dm, stages=())
+    return dict(opts, data=str(dm.h5_path))
 
 
 def rows_of(f: dict) -> list:

@@ -12,11 +12,26 @@
 
 namespace bsp {
 
+// What the crop box is made from (docs/hdf5-schema.md, "Crop box"): the segmentation
+// mask's box only (what a person detector could see; a frame without a pedestrian pixel
+// gets no crop), the union of the mask box and the ground-truth joint box (the first
+// versions' crops: partly cut from the answer), or the joint box only.
+enum class CropBoxPolicy : int { mask = 0, mask_joints = 1, joints = 2 };
+// "mask", "mask+joints", "joints" (the CLI's and the HDF5 attribute's spelling).
+const char* crop_box_name(CropBoxPolicy p);
+// The policy of a name above; std::invalid_argument listing the names otherwise.
+CropBoxPolicy crop_box_policy(const std::string& name);
+
 // Media of every clip frame (on by default): pedestrian crops and masks in a per-split
 // frame table (docs/hdf5-schema.md, "Frame table").
 struct MediaOptions {
   bool enabled = true;
   int crop_size = 128;          // S: crops are S x S
+  CropBoxPolicy crop_box = CropBoxPolicy::mask;
+  // > 1: also store frames/context_rgb, the crop box widened by this factor about its
+  // centre (side ceil(context * side)) at ceil(context * S) pixels, for box noise
+  // (bsp_fast.data); 1 = none.
+  double crop_context = 1.0;
   bool skip_bad_media = false;  // leave out recordings whose media is missing or broken
   // Measured in benchmarks/bench_convert_media.py (docs/hdf5-schema.md): masks shrink ~20x
   // with deflate 1 and still read at ~30k frames/s; RGB crops only ~2.5x, and deflated
@@ -95,6 +110,7 @@ struct MediaReport {
   double seconds = 0;                   // checking, decoding, cropping and writing
   double check_seconds = 0;             // opening every file before decoding
   std::vector<BadMedia> bad;            // left out with skip_bad_media
+  std::array<std::size_t, 3> fully_occluded{};  // frame-table rows without a pedestrian pixel
   int passes = 0;  // times the file was written: > 1 when a file failed mid-decode (skipped)
 };
 
@@ -143,15 +159,28 @@ struct FrameMedia {
   std::array<std::int32_t, 4> mask_bbox{-1, -1, -1, -1};  // [u0, v0, u1, v1), -1 = no tag 4
   std::int64_t visible_pixels = 0;                          // tag-4 pixels in the frame
   std::array<std::uint8_t, 26> joint_visible{};
-  std::array<float, 4> crop_box{};  // [u0, v0, u1, v1], integer edges, square, may leave the image
+  // [u0, v0, u1, v1], integer edges, square, may leave the image; all NaN = no crop
+  // (CropBoxPolicy::mask on a frame without a pedestrian pixel)
+  std::array<float, 4> crop_box{};
+  bool has_crop() const { return crop_box[0] == crop_box[0]; }
 };
 
 // The pedestrian statistics of one segmentation frame (height x width tags) with its 26
 // projected joints `uv` (u, v pairs; non-finite joints are ignored). A joint is visible
 // when a tag-4 pixel lies within kVisibilityRadius of (floor(u + 0.5), floor(v + 0.5)).
 // The crop box is the square of side max(kCropMinSize, ceil(kCropScale * max(w, h)))
-// around the centre of (joint bbox U mask bbox), its corner at floor(centre - side/2 + 0.5).
-FrameMedia frame_media(const std::uint8_t* tags, int width, int height, const float* uv);
+// around the centre of the policy's box (mask bbox, joint bbox U mask bbox, or joint
+// bbox), its corner at floor(centre - side/2 + 0.5). Under `mask` a frame without a tag-4
+// pixel gets no crop (NaN box); under the others an empty box falls back to the joints,
+// then to the image centre.
+FrameMedia frame_media(const std::uint8_t* tags, int width, int height, const float* uv,
+                       CropBoxPolicy policy = CropBoxPolicy::mask);
+
+// The context box of a crop box: the square of side ceil(context * side - 1e-9) with the
+// same centre, corner at u0 - floor((side_c - side) / 2) (integer edges). NaN stays NaN.
+std::array<float, 4> context_box(const std::array<float, 4>& box, double context);
+// Pixels of the context crop of a crop_size S crop: ceil(context * S - 1e-9).
+int context_size(int crop_size, double context);
 
 // Cuts `box` (integer edges, as frame_media makes them) out of an image of which only the
 // region roi_x, roi_y, roi_width x roi_height is given (`roi`: rows of roi_width * channels

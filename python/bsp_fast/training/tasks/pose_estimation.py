@@ -1,9 +1,25 @@
-"""Crops -> 2D joints in crop pixels: PCK@0.05 and PCKhn@0.1 over the visible joints."""
+"""Crops -> 2D joints in crop pixels, scored with one protocol for every row
+(docs/metrics.md, "Pose estimation protocol"):
+
+* ``pck_0.05``: PCK@0.05 over every ground-truth joint of every frame that has a crop,
+  normalised by the diagonal of the box of those joints (as the report);
+* ``pckhn_0.1``: PCKhn@0.1, normalised by the true hips-neck distance;
+* ``pck_0.05_visible`` / ``pck_0.05_occluded``: the same PCK@0.05 (same normaliser) over
+  the joints the mask shows (``frames/joint_visible``) and over the others;
+* ``pck_0.05_aligned`` / ``pckhn_0.1_aligned``: the report's hips-aligned protocol, the
+  prediction translated so its hips lie on the true hips (the hips not counted);
+* extra: ``pck_0.05/<joint>`` per joint and ``fully_occluded_frames`` (scored frames
+  without a crop: no pedestrian pixel under mask boxes; not scored).
+"""
 from __future__ import annotations
 
+from ...skeleton import JOINT_NAMES
 from .base import Metric, Task
 
 __all__ = ["PoseEstimation"]
+
+_PER_JOINT = tuple(Metric(f"pck_0.05/{n}", f"PCK@0.05 {n}", "fraction", "higher", "pct")
+                   for n in JOINT_NAMES)
 
 
 class PoseEstimation(Task):
@@ -13,20 +29,49 @@ class PoseEstimation(Task):
     baseline = "mean crop skeleton"
     image_inputs = True
     metrics = (Metric("pck_0.05", "PCK@0.05", "fraction", "higher", "pct"),
-               Metric("pckhn_0.1", "PCKhn@0.1", "fraction", "higher", "pct"))
+               Metric("pckhn_0.1", "PCKhn@0.1", "fraction", "higher", "pct"),
+               Metric("pck_0.05_visible", "PCK@0.05 visible", "fraction", "higher", "pct"),
+               Metric("pck_0.05_occluded", "PCK@0.05 occluded", "fraction", "higher", "pct"),
+               Metric("pck_0.05_aligned", "PCK@0.05 hips-aligned", "fraction", "higher", "pct"),
+               Metric("pckhn_0.1_aligned", "PCKhn@0.1 hips-aligned", "fraction", "higher",
+                      "pct"))
+    extra_metrics = _PER_JOINT + (Metric("fully_occluded_frames", "fully occluded frames",
+                                         "frames", "none", ".0f"),)
     curves = ("pck_0.05", "pckhn_0.1")
+
+    def dataset_options(self, cfg: dict) -> dict:
+        """Train-time box jitter (``box_jitter_scale``, ``box_jitter_shift``; default off):
+        the train split's crop boxes perturbed per frame and re-cut from the context crops."""
+        scale = cfg.get("box_jitter_scale", 0.0) or 0.0
+        shift = cfg.get("box_jitter_shift", 0.0) or 0.0
+        return {"box_jitter": (float(scale), float(shift))} if scale or shift else {}
 
     def metric_modules(self) -> dict:
         from ... import metrics as M
 
         return {"pck_0.05": M.PCK(alpha=0.05, norm="bbox"),
-                "pckhn_0.1": M.PCK(alpha=0.1, norm="hips_neck")}
+                "pckhn_0.1": M.PCK(alpha=0.1, norm="hips_neck"),
+                "pck_0.05_visible": M.PCK(alpha=0.05, norm="bbox"),
+                "pck_0.05_occluded": M.PCK(alpha=0.05, norm="bbox"),
+                "pck_0.05_aligned": M.PCK(alpha=0.05, norm="bbox", align="hips"),
+                "pckhn_0.1_aligned": M.PCK(alpha=0.1, norm="hips_neck", align="hips"),
+                "pck_0.05_per_joint": M.PCKPerJoint(alpha=0.05, norm="bbox",
+                                                    prefix="pck_0.05/"),
+                "fully_occluded_frames": M.FrameCount()}
 
     def update_metrics(self, scores, output, batch, model) -> None:
+        import torch
+
         sl = self.scored_frames(model, batch["targets"].shape[1])
-        target, visible = batch["targets"][:, sl].float(), batch["visible"][:, sl]
-        scores["pck_0.05"].update(output, target, visible=visible)
-        scores["pckhn_0.1"].update(output, target, visible=visible)
+        target, visible = batch["targets"][:, sl].float(), batch["visible"][:, sl].bool()
+        present = torch.isfinite(target).all(-1)  # every joint of a frame with a crop
+        for key in ("pck_0.05", "pckhn_0.1", "pck_0.05_aligned", "pckhn_0.1_aligned",
+                    "pck_0.05_per_joint"):
+            scores[key].update(output, target, visible=present)
+        scores["pck_0.05_visible"].update(output, target, visible=present, select=visible)
+        scores["pck_0.05_occluded"].update(output, target, visible=present, select=~visible)
+        box = batch["crop_box"][:, sl]
+        scores["fully_occluded_frames"].update(~torch.isfinite(box).all(-1))
 
     def predictions(self, output, batch, model) -> dict:
         """``pixels``: crop pixels mapped to image pixels through each frame's crop box."""
