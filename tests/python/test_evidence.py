@@ -238,8 +238,11 @@ def test_precision_auto_follows_the_per_model_decision(monkeypatch):
     assert resolve_precision("auto", "cpu", cls["baseline_3d"]) == "32"
 
 
-#: bf16 autocast against float32 on the same weights and clips: relative tolerance
-BF16_TOLERANCE = 0.02
+#: bf16 autocast against float32 on the same weights and clips: relative tolerance of an
+#: error in mm; a PCK is a share of joints, and bf16 rounding moves a few joints across the
+#: threshold (on a CPU with native bf16, 0.0075 vs 0.0074 here): an absolute tolerance of
+#: 0.5 percentage points of the joints
+BF16_TOLERANCE = {"mpjpe_mm": dict(rel=0.02), "pck_0.05": dict(abs=0.005)}
 
 
 @pytest.mark.parametrize("task,name,metric", [("lifting", "baseline_3d", "mpjpe_mm"),
@@ -258,7 +261,7 @@ def test_bf16_metrics_stay_within_tolerance_of_fp32(data, task, name, metric):
         tm = TaskMetrics(task)
         tm.update(out, b, m)
         values[bf16] = tm.compute()[metric]
-    assert values[True] == pytest.approx(values[False], rel=BF16_TOLERANCE)
+    assert values[True] == pytest.approx(values[False], **BF16_TOLERANCE[metric])
 
 
 # ---------------------------------------------------------------------- runs
