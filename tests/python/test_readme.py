@@ -42,6 +42,6 @@ def test_pip_install_section_matches_the_build():
     assert "doctest-dev" not in wanted  # pip install . does not build the C++ tests
     assert {"libhdf5-dev", "libavcodec-dev", "libopencv-dev", "cmake"} <= wanted
     pyproject = (ROOT / "pyproject.toml").read_text()
-    torch_extra = re.search(r"^torch = \[(.*?)\]", pyproject, re.M).group(1)
+    torch_extra = re.search(r"^torch = \[(.*?)\]", pyproject, re.M | re.S).group(1)
     assert "==" not in torch_extra and "lightning" in torch_extra
     assert "pip install '.[torch]'" in section
