@@ -83,7 +83,7 @@ def _test_metrics(run: Path) -> dict:
 def test_signal_saves_and_resume_ends_like_an_uninterrupted_run(clips, uninterrupted,
                                                                 tmp_path, signum, code):
     out = tmp_path / "run"
-    proc = _start(clips, out)
+    proc = _start(clips, out, cwd=tmp_path)  # outside the repository
     _wait_for_training(out, proc)
     proc.send_signal(signum)
     _, err = proc.communicate(timeout=120)

@@ -203,16 +203,26 @@ def main(argv=None) -> int:
         parser.error("give a TABLE name or --table FILE.yaml (one of them)")
     if ns.table_file is not None and Path(ns.table_file).suffix not in (".yaml", ".yml"):
         parser.error(f"--table {ns.table_file}: a table file ends in .yaml or .yml")
+    from .lifecycle import Interrupted, signals
+
     try:
         tab = load_table(ns.table or ns.table_file)
         overrides = C.parse_hp(ns.set)
         rows = [r.strip() for r in ns.rows.split(",") if r.strip()] if ns.rows else None
-        if ns.seeds != 1 or ns.split_seeds:
-            from .evidence import main_seeds
+        # SIGTERM/SIGINT: Interrupted here; the runs in worker processes get SIGTERM and
+        # save, a run in this process saves at the end of its batch
+        with signals():
+            if ns.seeds != 1 or ns.split_seeds:
+                from .evidence import main_seeds
 
-            return main_seeds(tab, ns, rows, overrides)
-        res = reproduce(tab, ns.data, ns.budget, ns.out, rows=rows, overrides=overrides,
-                        force=ns.force, quiet=not ns.verbose, dry_run=ns.dry_run)
+                return main_seeds(tab, ns, rows, overrides)
+            res = reproduce(tab, ns.data, ns.budget, ns.out, rows=rows, overrides=overrides,
+                            force=ns.force, quiet=not ns.verbose, dry_run=ns.dry_run)
+    except Interrupted as exc:
+        print(f"bsp-reproduce: interrupted ({exc}); finished rows are kept and reused, an "
+              "interrupted row continues where it stopped when the same command is run "
+              "again", file=sys.stderr)
+        return exc.code
     except (C.ConfigError, ValueError) as exc:
         print(f"bsp-reproduce: {exc}", file=sys.stderr)
         return 2
