@@ -65,12 +65,18 @@ def average_precision(pred, target) -> float:
     """Average precision of the crossing class: ``Σ_n (R_n − R_{n−1}) P_n`` over the
     distinct score thresholds, highest first (the step-wise area under the
     precision-recall curve, without interpolation). NaN when no sample is positive."""
-    from torchmetrics.functional.classification import binary_average_precision
-
     scores, t = _binary(pred, target)
     if int(t.sum()) == 0:
         return float("nan")
-    return float(binary_average_precision(scores.double(), t, thresholds=None))
+    # in float64 throughout (torchmetrics' precision-recall curve is float32)
+    s, y = scores.double().numpy(), t.numpy().astype(np.float64)
+    order = np.argsort(-s, kind="stable")
+    s, y = s[order], y[order]
+    last = np.r_[np.flatnonzero(np.diff(s)), len(s) - 1]  # last sample of each threshold
+    tp = np.cumsum(y)[last]
+    chosen = last + 1.0
+    recall = tp / tp[-1]
+    return float(np.sum(np.diff(np.r_[0.0, recall]) * (tp / chosen)))
 
 
 def pck_curve(pred, gt, *, alphas=PCK_AUC_ALPHAS, norm: str = "bbox", visible=None):

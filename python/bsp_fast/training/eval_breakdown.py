@@ -36,7 +36,7 @@ from .. import metrics as M
 from ..metrics.threshold_free import positive_scores
 from ..skeleton import HIPS, JOINT_NAMES, NUM_JOINTS
 
-__all__ = ["BreakdownCollector", "build_breakdown", "FILE", "HEIGHT_EDGES_PX",
+__all__ = ["BreakdownCollector", "build_breakdown", "bin_index", "FILE", "HEIGHT_EDGES_PX",
            "DISTANCE_EDGES_M", "MISSING_BINS", "PCK_ALPHA", "TTE_NOTE"]
 
 FILE = "test_breakdown.json"
@@ -135,7 +135,7 @@ def _edges_label(lo: float, hi: float, unit: str) -> str:
     return f"{lo:g}-{hi:g} {unit}"
 
 
-def _bin_fixed(values: np.ndarray, edges) -> np.ndarray:
+def bin_index(values: np.ndarray, edges) -> np.ndarray:
     """The bin of each value: half-open ``[lo, hi)`` bins between ``edges``; a value below
     the first edge goes to the first bin (a box of negative height cannot occur)."""
     return np.searchsorted(np.asarray(edges[1:-1]), values, side="right")
@@ -252,7 +252,7 @@ def _classification(parts, rows, profiles, per_frame, bins) -> dict:
     prof_idx = np.array([prof.index(p) for p in profiles])
     tables = [
         _table("per pedestrian pixel height", "height", "clips", cols,
-               _grouped(h_labels, _bin_fixed(height, HEIGHT_EDGES_PX), stats), N),
+               _grouped(h_labels, bin_index(height, HEIGHT_EDGES_PX), stats), N),
         _table("per age/gender profile", "profile", "clips", cols,
                _grouped(prof, prof_idx, stats), N),
         _table("per realised missing-joint count", "missing joints per frame", "clips", cols,
@@ -298,7 +298,7 @@ def _frame_tables(task, parts, profiles, per_frame, bins, notes) -> dict:
         bins["distance_m"] = {"rows": d_labels,
                               "per": "frame (hips' depth along the camera's forward axis)"}
         size_table = _table("per camera distance", "distance", "frames", cols,
-                            _grouped(d_labels, _bin_fixed(dist, DISTANCE_EDGES_M), stats), F)
+                            _grouped(d_labels, bin_index(dist, DISTANCE_EDGES_M), stats), F)
     else:
         pred, gt, present = _frames(parts, "pred"), _frames(parts, "gt"), \
             _frames(parts, "present")
@@ -322,7 +322,7 @@ def _frame_tables(task, parts, profiles, per_frame, bins, notes) -> dict:
         bins["height_px"] = {"rows": h_labels,
                              "per": "frame (vertical extent of its ground-truth 2D joints)"}
         size_table = _table("per pedestrian pixel height", "height", "frames", cols,
-                            _grouped(h_labels, _bin_fixed(height, HEIGHT_EDGES_PX), stats), F)
+                            _grouped(h_labels, bin_index(height, HEIGHT_EDGES_PX), stats), F)
     tables = [_table("per joint", "joint", "joints", joint_cols, joint_rows, total_joints),
               size_table]
     prof = sorted(set(profiles))
