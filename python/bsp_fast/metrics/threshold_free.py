@@ -53,12 +53,16 @@ def auroc(pred, target) -> float:
     """Area under the ROC curve of the crossing class (ties count one half): the chance
     that a random crossing sample scores above a random non-crossing one. NaN when the
     target has a single class. ``pred``: scores or logits (:func:`positive_scores`)."""
-    from torchmetrics.functional.classification import binary_auroc
-
     scores, t = _binary(pred, target)
     if int(t.sum()) in (0, len(t)):
         return float("nan")
-    return float(binary_auroc(scores.double(), t, thresholds=None))
+    # Mann-Whitney U from average ranks, in float64 (torchmetrics' ROC is float32)
+    s, y = scores.double().numpy(), t.numpy().astype(bool)
+    _, inverse, counts = np.unique(s, return_inverse=True, return_counts=True)
+    ranks = (np.cumsum(counts) - (counts - 1) / 2.0)[inverse]  # 1-based, ties averaged
+    n1 = int(y.sum())
+    n0 = len(y) - n1
+    return float((ranks[y].sum() - n1 * (n1 + 1) / 2.0) / (n1 * n0))
 
 
 def average_precision(pred, target) -> float:
