@@ -160,13 +160,9 @@ def _frames(parts: list, key: str) -> np.ndarray:
 
 def _clip_to_frames(parts: list, values: list) -> np.ndarray:
     """A per-clip list repeated for each of the clip's scored frames."""
-    out, i = [], 0
-    for p in parts:
-        n = p["frames"][1] - p["frames"][0]
-        for _ in range(len(p["row"])):
-            out += [values[i]] * n
-            i += 1
-    return np.asarray(out, dtype=object)
+    counts = np.concatenate([np.full(len(p["row"]), p["frames"][1] - p["frames"][0])
+                             for p in parts])
+    return np.repeat(np.asarray(values, dtype=object), counts)
 
 
 def _table(title: str, by: str, unit: str, columns: dict, rows: list, total: int) -> dict:
@@ -206,7 +202,7 @@ def _cls_stats(score, pred, label) -> dict:
 
 def _grouped(labels: list, index: np.ndarray, stats) -> list:
     """One row per label: ``stats(mask)`` for the members of each group."""
-    return [{"bin": lab, **stats(index == i)} for i, lab in enumerate(labels)]
+    return [{"bin": str(lab), **stats(index == i)} for i, lab in enumerate(labels)]
 
 
 # ---------------------------------------------------------------------- the tables
@@ -248,8 +244,7 @@ def _classification(parts, rows, profiles, per_frame, bins) -> dict:
     h_labels = [_edges_label(a, b, "px") for a, b in zip(HEIGHT_EDGES_PX, HEIGHT_EDGES_PX[1:])]
     bins["height_px"] = {"rows": h_labels, "per": "clip (mean over its frames)"}
     bins["missing_joints"] = {"rows": _missing_labels(), "per": "clip (mean per frame, rounded)"}
-    prof = sorted(set(profiles))
-    prof_idx = np.array([prof.index(p) for p in profiles])
+    prof, prof_idx = np.unique(np.asarray(profiles, dtype=str), return_inverse=True)
     tables = [
         _table("per pedestrian pixel height", "height", "clips", cols,
                _grouped(h_labels, bin_index(height, HEIGHT_EDGES_PX), stats), N),
@@ -325,8 +320,7 @@ def _frame_tables(task, parts, profiles, per_frame, bins, notes) -> dict:
                             _grouped(h_labels, bin_index(height, HEIGHT_EDGES_PX), stats), F)
     tables = [_table("per joint", "joint", "joints", joint_cols, joint_rows, total_joints),
               size_table]
-    prof = sorted(set(profiles))
-    prof_idx = np.array([prof.index(p) for p in profile])
+    prof, prof_idx = np.unique(profile.astype(str), return_inverse=True)
     tables.append(_table("per age/gender profile", "profile", "frames", cols,
                          _grouped(prof, prof_idx, stats), F))
     if task in ("lifting", "autoencoder"):
