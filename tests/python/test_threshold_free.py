@@ -77,3 +77,18 @@ def test_parameter_and_flop_counts_by_hand():
     per_frame = 2 * (52 * 1024 + 4 * 1024 * 1024 + 1024 * 78)
     assert flops_per_clip(net, batch) == per_frame * L
     assert net.training  # mode restored
+
+
+def test_auroc_and_ap_are_exact_in_float64():
+    # positives ranked 1st, 4th and 8th of 10 (scores falling): they beat 7, 5 and 2 of
+    # the 7 negatives -> AUROC 14/21; AP = (1/1 + 2/4 + 3/8) / 3 = 0.625. A float32
+    # curve (torchmetrics) is off by ~1e-8 on such fractions.
+    s = np.array([0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1, 0.05])
+    t = np.array([1, 0, 0, 1, 0, 0, 0, 1, 0, 0])
+    assert T.auroc(s, t) == 14 / 21
+    assert T.average_precision(s, t) == pytest.approx(0.625, rel=1e-15)
+    # tied thresholds: one positive and one negative share 0.5 -> half a pair each way
+    s2, t2 = np.array([0.5, 0.5, 0.2, 0.9]), np.array([1, 0, 0, 1])
+    assert T.auroc(s2, t2) == 3.5 / 4
+    # AP over distinct thresholds: 0.9 (1/1, recall 1/2), 0.5 (2/3, recall 1)
+    assert T.average_precision(s2, t2) == pytest.approx(0.5 * 1 + 0.5 * 2 / 3, rel=1e-15)

@@ -53,24 +53,34 @@ def auroc(pred, target) -> float:
     """Area under the ROC curve of the crossing class (ties count one half): the chance
     that a random crossing sample scores above a random non-crossing one. NaN when the
     target has a single class. ``pred``: scores or logits (:func:`positive_scores`)."""
-    from torchmetrics.functional.classification import binary_auroc
-
     scores, t = _binary(pred, target)
     if int(t.sum()) in (0, len(t)):
         return float("nan")
-    return float(binary_auroc(scores.double(), t, thresholds=None))
+    # Mann-Whitney U from average ranks, in float64 (torchmetrics' ROC is float32)
+    s, y = scores.double().numpy(), t.numpy().astype(bool)
+    _, inverse, counts = np.unique(s, return_inverse=True, return_counts=True)
+    ranks = (np.cumsum(counts) - (counts - 1) / 2.0)[inverse]  # 1-based, ties averaged
+    n1 = int(y.sum())
+    n0 = len(y) - n1
+    return float((ranks[y].sum() - n1 * (n1 + 1) / 2.0) / (n1 * n0))
 
 
 def average_precision(pred, target) -> float:
     """Average precision of the crossing class: ``Σ_n (R_n − R_{n−1}) P_n`` over the
     distinct score thresholds, highest first (the step-wise area under the
     precision-recall curve, without interpolation). NaN when no sample is positive."""
-    from torchmetrics.functional.classification import binary_average_precision
-
     scores, t = _binary(pred, target)
     if int(t.sum()) == 0:
         return float("nan")
-    return float(binary_average_precision(scores.double(), t, thresholds=None))
+    # in float64 throughout (torchmetrics' precision-recall curve is float32)
+    s, y = scores.double().numpy(), t.numpy().astype(np.float64)
+    order = np.argsort(-s, kind="stable")
+    s, y = s[order], y[order]
+    last = np.r_[np.flatnonzero(np.diff(s)), len(s) - 1]  # last sample of each threshold
+    tp = np.cumsum(y)[last]
+    chosen = last + 1.0
+    recall = tp / tp[-1]
+    return float(np.sum(np.diff(np.r_[0.0, recall]) * (tp / chosen)))
 
 
 def pck_curve(pred, gt, *, alphas=PCK_AUC_ALPHAS, norm: str = "bbox", visible=None):

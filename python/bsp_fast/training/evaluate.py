@@ -1,7 +1,9 @@
 """``bsp-eval RUN_OR_CKPT``: re-evaluate a checkpoint; ``bsp-eval --table RUN...``: runs
 side by side in the layout of the report's tables.
 
-Python: ``bsp_fast.evaluate("runs/lifting-martinez", split="test")`` -> :class:`EvalResult`.
+Python: ``bsp_fast.evaluate("runs/lifting-martinez", split="test")`` -> :class:`EvalResult`;
+``breakdown("runs/lifting-martinez")`` -> the test split's breakdown document
+(``bsp-eval RUN --breakdown``, :mod:`bsp_fast.training.eval_breakdown`).
 """
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ from pathlib import Path
 from . import config as C
 from .runs import RunError, read_run, resolve_checkpoint, write_json
 
-__all__ = ["evaluate", "main", "EvalResult", "load_run", "prepare_scoring"]
+__all__ = ["evaluate", "breakdown", "main", "EvalResult", "load_run", "prepare_scoring"]
 
 SPLIT_STAGES = {"test": "test", "val": "validate"}
 
@@ -92,13 +94,14 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
              batch_size: int | None = None, workers: int | None = None,
              accelerator: str | None = None, noise: float | None = None, mjp=None,
              limit_batches: int | None = None, quiet: bool = True,
-             box_noise=None) -> EvalResult:
+             box_noise=None, callbacks=()) -> EvalResult:
     """Scores the ``which`` checkpoint (best or last) of run directory or checkpoint
     ``run`` on ``split`` (test or val) with the run's data settings (same batch size, so
     the same fixed evaluation noise), any of them overridable; reproduces the run's
     ``metrics.json``. ``box_noise=(scale, shift)`` (pose_estimation) scores the crops of
     noisy boxes instead: side x U[1 - scale, 1 + scale], centre moved by U[-shift, shift]
-    x side per axis, fixed per clip by the evaluation seed (docs/data.md, "Box noise")."""
+    x side per axis, fixed per clip by the evaluation seed (docs/data.md, "Box noise").
+    ``callbacks``: more Lightning callbacks for the evaluation Trainer."""
     if split not in SPLIT_STAGES:
         raise ValueError(f"split must be one of {list(SPLIT_STAGES)}, got {split!r}")
     from .train import make_datamodule, make_trainer, prepare_data
@@ -114,7 +117,7 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
                              f"{module.task} run")
         dm.dataset_options["box_noise"] = tuple(float(x) for x in box_noise)
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
-    trainer = make_trainer(cfg, None, precision, fit=False)
+    trainer = make_trainer(cfg, None, precision, fit=False, callbacks=callbacks)
     if split == "test":
         trainer.test(module, datamodule=dm, verbose=False)
     else:
@@ -122,6 +125,33 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
     metrics = dict(module.results.get(split, {}))
     return EvalResult(task=module.task, model=module.hparams["model"], split=split,
                       metrics=metrics, checkpoint=Path(ckpt), config=cfg)
+
+
+def breakdown(run, data=None, *, which: str = "best", save: bool = False, **options) -> dict:
+    """Scores the test split of run directory or checkpoint ``run`` like :func:`evaluate`
+    (``options``: its keywords) and returns the breakdown document of
+    :func:`bsp_fast.training.eval_breakdown.build_breakdown` (tables per joint, size or
+    distance bin, profile, missing-joint count; counts that add up to ``totals``), with
+    ``checkpoint``, ``model`` and the run's overall ``metrics``. ``save=True`` also
+    writes it to ``RUN/test_breakdown.json`` (a run directory is needed)."""
+    from .breakdown_format import to_json
+    from .eval_breakdown import FILE, BreakdownCollector, build_breakdown
+
+    run_dir = None
+    if save:
+        run_dir = resolve_checkpoint(run, which)[1]
+        if run_dir is None:
+            raise RunError(f"{run}: --save writes {FILE} into a run directory; this "
+                           "checkpoint has none")
+    collector = BreakdownCollector()
+    res = evaluate(run, "test", data, which=which, callbacks=[collector], **options)
+    doc = build_breakdown(collector, res.task, res.metrics)
+    doc.update(model=res.model, checkpoint=str(res.checkpoint))
+    if save:
+        from ..atomic import write_text
+
+        write_text(Path(run_dir) / FILE, to_json(doc) + "\n")
+    return doc
 
 
 def _box_noise(text: str) -> tuple:
@@ -147,8 +177,14 @@ def _parser() -> argparse.ArgumentParser:
                    help="a run directory or .ckpt (several with --table)")
     p.add_argument("--table", action="store_true",
                    help="print the runs' saved metrics side by side (one table per task)")
-    p.add_argument("--format", default="markdown", choices=("markdown", "csv"),
-                   help="table format")
+    p.add_argument("--format", default="markdown", choices=("markdown", "md", "csv", "json"),
+                   help="table format (json: --breakdown only)")
+    p.add_argument("--breakdown", action="store_true",
+                   help="score the test split and print its metrics per joint, per pixel "
+                        "height (2D) or camera distance (lifting) bin, per age/gender, per "
+                        "realised missing-joint count, with counts (docs/training.md)")
+    p.add_argument("--save", action="store_true",
+                   help="--breakdown: also write RUN/test_breakdown.json")
     p.add_argument("--split", default="test", choices=tuple(SPLIT_STAGES),
                    help="split to evaluate (tables: val = the best epoch's val metrics)")
     p.add_argument("--which", default="best", choices=("best", "last"),
@@ -182,10 +218,19 @@ def main(argv=None) -> int:
         if args.table:
             from .tables import runs_table
 
-            print(runs_table(args.runs, args.format, args.split))
+            if args.format == "json" or args.breakdown:
+                raise C.ConfigError("--table prints markdown or csv, without --breakdown")
+            print(runs_table(args.runs, "markdown" if args.format == "md" else args.format,
+                             args.split))
             return 0
         if len(args.runs) != 1:
             raise C.ConfigError("evaluate one run or checkpoint at a time (or use --table)")
+        if args.format == "json" and not args.breakdown:
+            raise C.ConfigError("--format json applies to --breakdown only")
+        if args.save and not args.breakdown:
+            raise C.ConfigError("--save writes the breakdown: add --breakdown")
+        if args.breakdown:
+            return _print_breakdown(args)
         res = evaluate(args.runs[0], args.split, args.data, which=args.which,
                        batch_size=args.batch_size, workers=args.workers,
                        accelerator=args.accelerator, noise=args.noise, mjp=args.mjp,
@@ -204,6 +249,25 @@ def main(argv=None) -> int:
     print(f"{res.task} / {res.model}: {res.split} metrics of {res.checkpoint}")
     for key, value in res.metrics.items():
         print(f"  {key:14s} {value:.6g}")
+    return 0
+
+
+def _print_breakdown(args) -> int:
+    from .breakdown_format import format_breakdown
+
+    if args.split != "test":
+        raise C.ConfigError("--breakdown scores the test split; leave out --split")
+    doc = breakdown(args.runs[0], args.data, which=args.which, save=args.save,
+                    batch_size=args.batch_size, workers=args.workers,
+                    accelerator=args.accelerator, noise=args.noise, mjp=args.mjp,
+                    limit_batches=args.limit_batches, quiet=args.quiet,
+                    box_noise=args.box_noise)
+    if args.json:
+        write_json({"task": doc["task"], "model": doc["model"], "split": "test",
+                    "checkpoint": doc["checkpoint"], "test": doc["metrics"]}, args.json)
+    heading = f"{doc['task']} / {doc['model']}: test breakdown of {doc['checkpoint']}"
+    print(format_breakdown(doc, "md" if args.format == "markdown" else args.format,
+                           heading=heading))
     return 0
 
 

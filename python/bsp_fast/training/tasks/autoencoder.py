@@ -28,9 +28,10 @@ class Autoencoder(Task):
         return {"pck_0.05": M.PCK(alpha=0.05, norm="bbox"),
                 "pckhn_0.1": M.PCK(alpha=0.1, norm="hips_neck"), "mjr": MeanMetric()}
 
-    def update_metrics(self, scores, output, batch, model) -> None:
-        """Output and clean target both mapped back to pixels with the target's shift and
-        scale; PCK over the joints present in the target (the hips always)."""
+    def pose_pairs(self, output, batch, model) -> tuple:
+        """``(prediction, target, present)`` as PCK scores them, on the scored frames:
+        output and clean target both mapped back to pixels with the target's shift and
+        scale, ``present`` the joints present in the target (the hips always)."""
         from ...models.base import present_joints
 
         sl = self.scored_frames(model, batch["targets"].shape[1])
@@ -38,7 +39,11 @@ class Autoencoder(Task):
         scale = batch["target_scale"][:, sl, None, None].float()
         shift = batch["target_shift"][:, sl, None, :].float()
         present = present_joints(target)
-        pred_px, gt_px = output * scale + shift, target * scale + shift
+        return output * scale + shift, target * scale + shift, present
+
+    def update_metrics(self, scores, output, batch, model) -> None:
+        """PCK of :meth:`pose_pairs`; MJR of the inputs."""
+        pred_px, gt_px, present = self.pose_pairs(output, batch, model)
         scores["pck_0.05"].update(pred_px, gt_px, visible=present)
         scores["pckhn_0.1"].update(pred_px, gt_px, visible=present)
         missing = (~batch["visible"]).float()

@@ -91,9 +91,12 @@ class TaskModule(pl.LightningModule):
     def validation_step(self, batch: dict, batch_idx: int) -> None:
         self._eval_step(batch, self.val_metrics)
 
-    def test_step(self, batch: dict, batch_idx: int) -> None:
+    def test_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
+        """Scores one test batch; returns the model's output (callbacks such as
+        ``bsp-eval --breakdown``'s receive it in ``on_test_batch_end``)."""
         output = self._eval_step(batch, self.test_metrics)
         self.test_recordings.update(output.detach().float(), batch, self.net)
+        return output.detach()
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
         """The de-normalised outputs of one batch (tensors; the datasets of

@@ -59,12 +59,21 @@ class PoseEstimation(Task):
                                                     prefix="pck_0.05/"),
                 "fully_occluded_frames": M.FrameCount()}
 
+    def pose_pairs(self, output, batch, model) -> tuple:
+        """``(prediction, target, present)`` in crop pixels on the scored frames, as
+        ``pck_0.05`` scores them: ``present`` is every joint of a frame with a crop."""
+        import torch
+
+        sl = self.scored_frames(model, batch["targets"].shape[1])
+        target = batch["targets"][:, sl].float()
+        return output, target, torch.isfinite(target).all(-1)
+
     def update_metrics(self, scores, output, batch, model) -> None:
         import torch
 
         sl = self.scored_frames(model, batch["targets"].shape[1])
-        target, visible = batch["targets"][:, sl].float(), batch["visible"][:, sl].bool()
-        present = torch.isfinite(target).all(-1)  # every joint of a frame with a crop
+        _, target, present = self.pose_pairs(output, batch, model)
+        visible = batch["visible"][:, sl].bool()
         for key in ("pck_0.05", "pckhn_0.1", "pck_0.05_aligned", "pckhn_0.1_aligned",
                     "pck_0.05_per_joint"):
             scores[key].update(output, target, visible=present)

@@ -1,0 +1,339 @@
+"""Where a run's test error lies: per joint, per pedestrian size or distance, per profile,
+per realised missing-joint count (``bsp-eval RUN --breakdown``, docs/training.md).
+
+:class:`BreakdownCollector` is a Lightning callback: during ``trainer.test`` it keeps, for
+every scored frame (clip, for classification), what the task's metric is made of, taken
+from the same arrays the task scores (``Lifting.metres``, ``pose_pairs`` of the 2D tasks,
+the classifier's logits). :func:`build_breakdown` then reads what the batches do not hold
+from the clip file (the 2D joint boxes ``targets/bboxes``, the hips in the world and the
+camera transform) and groups. Every table says what its count column counts (clips,
+frames or joints); the counts of each table add up to ``totals`` of the split.
+
+Bins are fixed (the same rows for every run, so tables compare across runs):
+
+* pedestrian pixel height, 2D tasks: ``max v - min v`` of the frame's ground-truth 2D
+  joints (``targets/bboxes``), edges :data:`HEIGHT_EDGES_PX`; classification bins a clip by
+  the mean over its frames;
+* camera distance, lifting: the hips' depth along the camera's forward axis, from
+  ``targets/world_pose_loc`` and ``meta/camera_transform``, edges :data:`DISTANCE_EDGES_M`;
+* realised missing joints, 2D-input tasks: joints of the frame missing from the input
+  (``~visible``, after ``--mjp``), bins :data:`MISSING_BINS`; classification bins a clip
+  by its missing joints per frame, averaged over the clip and rounded;
+* profile: ``age/gender`` of the clip's meta.
+
+Time to event is not stored in a clip file (the planner's event frame of the benchmark's
+windows is not written, docs/hdf5-schema.md), so there is no time-to-event table.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from lightning.pytorch.callbacks import Callback
+
+from .. import metrics as M
+from ..metrics.threshold_free import positive_scores
+from ..skeleton import HIPS, JOINT_NAMES, NUM_JOINTS
+
+__all__ = ["BreakdownCollector", "build_breakdown", "bin_index", "FILE", "HEIGHT_EDGES_PX",
+           "DISTANCE_EDGES_M", "MISSING_BINS", "PCK_ALPHA", "TTE_NOTE"]
+
+FILE = "test_breakdown.json"
+HEIGHT_EDGES_PX = (0.0, 50.0, 100.0, 200.0, 400.0, math.inf)
+DISTANCE_EDGES_M = (0.0, 10.0, 20.0, 30.0, 50.0, math.inf)
+#: inclusive ranges of missing joints per frame
+MISSING_BINS = ((0, 0), (1, 2), (3, 5), (6, 10), (11, 18), (19, 25), (26, 26))
+PCK_ALPHA = 0.05
+TTE_NOTE = ("no time-to-event table: the clip file does not store the benchmark windows' "
+            "event frame (docs/hdf5-schema.md)")
+TWO_D = ("autoencoder", "pose_estimation")
+
+
+class BreakdownCollector(Callback):
+    """Keeps each test batch's scored arrays (as NumPy, on the CPU) in ``parts``; the
+    model's parameter count and forward FLOPs per clip (first batch) in ``cost``; the
+    test split's file in ``h5_path``."""
+
+    def __init__(self):
+        super().__init__()
+        self.parts: list = []
+        self.cost: dict = {}
+        self.h5_path = None
+
+    @torch.no_grad()
+    def on_test_batch_end(self, trainer, pl_module, outputs, batch, batch_idx,
+                          dataloader_idx=0):
+        if outputs is None:
+            raise RuntimeError("the module's test_step returned no output; "
+                               "--breakdown needs a bsp_fast TaskModule")
+        spec, net = pl_module.spec, pl_module.net
+        out = outputs.detach().float()
+        if not self.cost:
+            from ..models.cost import flops_per_clip, parameter_count
+
+            self.cost = {"parameters": parameter_count(net),
+                         "flops_per_clip": flops_per_clip(net, batch)}
+        meta = batch["meta"]
+        part = {"row": meta["row"].cpu().numpy() if torch.is_tensor(meta["row"])
+                else np.asarray(meta["row"]),
+                "profile": [f"{a}/{g}" for a, g in zip(meta["age"], meta["gender"])]}
+        L = batch["inputs"].shape[1]
+        sl = spec.scored_frames(net, L)
+        part["frames"] = (sl.start or 0, L if sl.stop is None else sl.stop)
+        if spec.name == "classification":
+            part["score"] = np.asarray(positive_scores(out.cpu().numpy()))
+            part["pred"] = M.predicted_labels(out).cpu().numpy()
+            part["label"] = batch["label"].cpu().numpy()
+            missing = (~batch["visible"].bool()).sum(-1).double().mean(-1)
+            part["missing"] = torch.round(missing).long().cpu().numpy()
+            self.parts.append(part)
+            return
+        if spec.name == "lifting":
+            pred_m, gt_m = spec.metres(out, batch, net)
+            d = (pred_m * 1000.0).double() - (gt_m * 1000.0).double()  # as MPJPE scores it
+            part["err"] = torch.sqrt((d * d).sum(-1)).cpu().numpy()  # (B, Ls, 26) mm
+        else:
+            pred, gt, present = spec.pose_pairs(out, batch, net)
+            part.update(pred=pred.cpu().numpy(), gt=gt.cpu().numpy(),
+                        present=present.bool().cpu().numpy())
+        if not spec.image_inputs:
+            vis = batch["visible"][:, sl].bool()
+            part["missing"] = (~vis).sum(-1).cpu().numpy()  # (B, Ls)
+        self.parts.append(part)
+
+    def on_test_end(self, trainer, pl_module):
+        dm = trainer.datamodule
+        if dm is not None and "test" in getattr(dm, "datasets", {}):
+            self.h5_path = str(dm.datasets["test"].h5_path)
+
+
+# ---------------------------------------------------------------------- clip-file values
+def _per_frame_values(h5_path, rows: np.ndarray, need_distance: bool) -> dict:
+    """``{"height": (N, L) px, "distance": (N, L) m}`` of the stored test ``rows``."""
+    from ..conversion.vds import open_clip_file
+    from ..geometry import rotation_matrix
+
+    uniq, inverse = np.unique(rows, return_inverse=True)
+    out = {}
+    with open_clip_file(h5_path) as f:
+        g = f["test"]
+        box = g["targets/bboxes"][uniq].astype(np.float64)  # (n, L, 2, 2)
+        out["height"] = (box[:, :, 1, 1] - box[:, :, 0, 1])[inverse]
+        if need_distance:
+            hips = g["targets/world_pose_loc"][uniq][:, :, HIPS].astype(np.float64)
+            cam = g["meta/camera_transform"][uniq].astype(np.float64)
+            forward = rotation_matrix(cam[:, 3:])[:, :, 0]  # the camera's x axis in the world
+            rel = hips - cam[:, None, :3]
+            out["distance"] = np.einsum("nlk,nk->nl", rel, forward)[inverse]
+    return out
+
+
+def _edges_label(lo: float, hi: float, unit: str) -> str:
+    if math.isinf(hi):
+        return f">= {lo:g} {unit}"
+    return f"{lo:g}-{hi:g} {unit}"
+
+
+def bin_index(values: np.ndarray, edges) -> np.ndarray:
+    """The bin of each value: half-open ``[lo, hi)`` bins between ``edges``; a value below
+    the first edge goes to the first bin (a box of negative height cannot occur)."""
+    return np.searchsorted(np.asarray(edges[1:-1]), values, side="right")
+
+
+def _missing_index(values: np.ndarray) -> np.ndarray:
+    idx = np.zeros(len(values), np.int64)
+    for i, (lo, hi) in enumerate(MISSING_BINS):
+        idx[(values >= lo) & (values <= hi)] = i
+    return idx
+
+
+def _missing_labels() -> list:
+    return [str(lo) if lo == hi else f"{lo}-{hi}" for lo, hi in MISSING_BINS]
+
+
+# ---------------------------------------------------------------------- groups
+def _frames(parts: list, key: str) -> np.ndarray:
+    """Per-frame array of ``key`` over every clip (clips in test order, frames in order)."""
+    return np.concatenate([p[key].reshape((-1,) + p[key].shape[2:]) for p in parts])
+
+
+def _clip_to_frames(parts: list, values: list) -> np.ndarray:
+    """A per-clip list repeated for each of the clip's scored frames."""
+    counts = np.concatenate([np.full(len(p["row"]), p["frames"][1] - p["frames"][0])
+                             for p in parts])
+    return np.repeat(np.asarray(values, dtype=object), counts)
+
+
+def _table(title: str, by: str, unit: str, columns: dict, rows: list, total: int) -> dict:
+    return {"title": title, "by": by, "count": unit, "columns": columns, "rows": rows,
+            "total": int(total)}
+
+
+def _lifting_stats(err: np.ndarray) -> dict:
+    n = int(err.shape[0])
+    return {"count": n, "joints": n * NUM_JOINTS,
+            "mpjpe_mm": float(err.sum() / err.size) if n else math.nan}
+
+
+def _pck_stats(pred, gt, present, with_auc: bool = True) -> dict:
+    n = int(pred.shape[0])
+    if n == 0:
+        return {"count": 0, "joints": 0, "pck_0.05": math.nan, "pck_auc": math.nan}
+    c = M.pck_counts(pred, gt, alpha=PCK_ALPHA, norm="bbox", visible=present)
+    out = {"count": n, "joints": c.total, "pck_0.05": c.value}
+    if with_auc:
+        out["pck_auc"] = M.pck_auc(pred, gt, norm="bbox", visible=present) if c.total \
+            else math.nan
+    return out
+
+
+def _cls_stats(score, pred, label) -> dict:
+    n = int(len(label))
+    out = {"count": n, "crossing": int(label.sum())}
+    if n == 0:
+        return out | {k: math.nan for k in ("f1", "precision", "recall", "accuracy", "auroc",
+                                             "average_precision")}
+    out.update(f1=float(M.f1_score(pred, label)), precision=float(M.precision(pred, label)),
+               recall=float(M.recall(pred, label)), accuracy=float(M.accuracy(pred, label)),
+               auroc=M.auroc(score, label), average_precision=M.average_precision(score, label))
+    return out
+
+
+def _grouped(labels: list, index: np.ndarray, stats) -> list:
+    """One row per label: ``stats(mask)`` for the members of each group."""
+    return [{"bin": str(lab), **stats(index == i)} for i, lab in enumerate(labels)]
+
+
+# ---------------------------------------------------------------------- the tables
+def build_breakdown(collector: BreakdownCollector, task: str, metrics: dict | None = None,
+                    h5_path=None) -> dict:
+    """The breakdown document (what ``--save`` writes to :data:`FILE`): ``totals``
+    (clips, frames, joints of the scored split), ``summary`` (the overall values, computed
+    from the kept arrays), ``tables`` (each with ``title``, ``by``, ``count`` (its unit),
+    ``columns`` ``{key: header}``, ``rows`` and ``total``), ``bins`` and ``notes``."""
+    parts = collector.parts
+    if not parts:
+        raise ValueError("breakdown: no test batch was scored")
+    h5_path = h5_path or collector.h5_path
+    rows = np.concatenate([p["row"] for p in parts])
+    profiles = [s for p in parts for s in p["profile"]]
+    per_frame = _per_frame_values(h5_path, rows, need_distance=task == "lifting")
+    notes, bins = [], {}
+    if task == "classification":
+        doc = _classification(parts, rows, profiles, per_frame, bins)
+        notes.append(TTE_NOTE)
+    else:
+        doc = _frame_tables(task, parts, profiles, per_frame, bins, notes)
+    doc.update(task=task, split="test", cost=dict(collector.cost), bins=bins, notes=notes,
+               metrics=dict(metrics or {}))
+    return doc
+
+
+def _classification(parts, rows, profiles, per_frame, bins) -> dict:
+    score, pred, label, missing = (np.concatenate([p[k] for p in parts])
+                                   for k in ("score", "pred", "label", "missing"))
+    height = per_frame["height"].mean(1)
+    N = len(label)
+
+    def stats(mask):
+        return _cls_stats(score[mask], pred[mask], label[mask])
+
+    cols = {"crossing": "crossing clips", "f1": "F1", "auroc": "AUROC",
+            "average_precision": "AP"}
+    h_labels = [_edges_label(a, b, "px") for a, b in zip(HEIGHT_EDGES_PX, HEIGHT_EDGES_PX[1:])]
+    bins["height_px"] = {"rows": h_labels, "per": "clip (mean over its frames)"}
+    bins["missing_joints"] = {"rows": _missing_labels(), "per": "clip (mean per frame, rounded)"}
+    prof, prof_idx = np.unique(np.asarray(profiles, dtype=str), return_inverse=True)
+    tables = [
+        _table("per pedestrian pixel height", "height", "clips", cols,
+               _grouped(h_labels, bin_index(height, HEIGHT_EDGES_PX), stats), N),
+        _table("per age/gender profile", "profile", "clips", cols,
+               _grouped(prof, prof_idx, stats), N),
+        _table("per realised missing-joint count", "missing joints per frame", "clips", cols,
+               _grouped(_missing_labels(), _missing_index(missing), stats), N)]
+    summary = _cls_stats(score, pred, label)
+    return {"totals": {"clips": N, "frames": N * per_frame["height"].shape[1]},
+            "summary": summary, "tables": tables,
+            "summary_columns": {"f1": "F1", "precision": "precision", "recall": "recall",
+                                "accuracy": "accuracy", "auroc": "AUROC",
+                                "average_precision": "AP", "crossing": "crossing clips"},
+            "summary_count": "clips"}
+
+
+def _frame_tables(task, parts, profiles, per_frame, bins, notes) -> dict:
+    N = sum(len(p["row"]) for p in parts)
+    # per-clip values of the clip file cut to each clip's scored frames
+    pos, height, distance = 0, [], []
+    for p in parts:
+        a, b = p["frames"]
+        n = len(p["row"])
+        height.append(per_frame["height"][pos:pos + n, a:b].reshape(-1))
+        if "distance" in per_frame:
+            distance.append(per_frame["distance"][pos:pos + n, a:b].reshape(-1))
+        pos += n
+    height = np.concatenate(height)
+    profile = _clip_to_frames(parts, profiles)
+    F = len(height)
+    if task == "lifting":
+        err = _frames(parts, "err")  # (F, 26) mm
+
+        def stats(mask):
+            return _lifting_stats(err[mask])
+
+        cols = {"joints": "joints", "mpjpe_mm": "MPJPE (mm)"}
+        joint_rows = [{"bin": name, "count": F, "mpjpe_mm": float(err[:, j].mean())
+                       if F else math.nan} for j, name in enumerate(JOINT_NAMES)]
+        joint_cols = {"mpjpe_mm": "MPJPE (mm)"}
+        total_joints = F * NUM_JOINTS
+        summary = _lifting_stats(err)
+        dist = np.concatenate(distance)
+        d_labels = [_edges_label(a, b, "m") for a, b in zip(DISTANCE_EDGES_M,
+                                                            DISTANCE_EDGES_M[1:])]
+        bins["distance_m"] = {"rows": d_labels,
+                              "per": "frame (hips' depth along the camera's forward axis)"}
+        size_table = _table("per camera distance", "distance", "frames", cols,
+                            _grouped(d_labels, bin_index(dist, DISTANCE_EDGES_M), stats), F)
+    else:
+        pred, gt, present = _frames(parts, "pred"), _frames(parts, "gt"), \
+            _frames(parts, "present")
+
+        def stats(mask):
+            return _pck_stats(pred[mask], gt[mask], present[mask])
+
+        cols = {"joints": "joints", "pck_0.05": "PCK@0.05 (%)", "pck_auc": "PCK-AUC (%)"}
+        joint_rows = []
+        for j, name in enumerate(JOINT_NAMES):
+            sel = np.zeros(present.shape, bool)
+            sel[:, j] = True
+            c = M.pck_counts(pred, gt, alpha=PCK_ALPHA, norm="bbox", visible=present,
+                             select=sel)
+            joint_rows.append({"bin": name, "count": c.total, "pck_0.05": c.value})
+        joint_cols = {"pck_0.05": "PCK@0.05 (%)"}
+        summary = _pck_stats(pred, gt, present)
+        total_joints = summary["joints"]
+        h_labels = [_edges_label(a, b, "px") for a, b in zip(HEIGHT_EDGES_PX,
+                                                             HEIGHT_EDGES_PX[1:])]
+        bins["height_px"] = {"rows": h_labels,
+                             "per": "frame (vertical extent of its ground-truth 2D joints)"}
+        size_table = _table("per pedestrian pixel height", "height", "frames", cols,
+                            _grouped(h_labels, bin_index(height, HEIGHT_EDGES_PX), stats), F)
+    tables = [_table("per joint", "joint", "joints", joint_cols, joint_rows, total_joints),
+              size_table]
+    prof, prof_idx = np.unique(profile.astype(str), return_inverse=True)
+    tables.append(_table("per age/gender profile", "profile", "frames", cols,
+                         _grouped(prof, prof_idx, stats), F))
+    if task in ("lifting", "autoencoder"):
+        missing = _frames(parts, "missing")
+        bins["missing_joints"] = {"rows": _missing_labels(),
+                                  "per": "frame (joints missing from the input)"}
+        tables.append(_table("per realised missing-joint count", "missing joints", "frames",
+                             cols, _grouped(_missing_labels(), _missing_index(missing),
+                                            stats), F))
+    else:
+        notes.append("no missing-joint table: pose_estimation's inputs are crops, not 2D "
+                     "joints with missing ones")
+    summary_cols = {k: v for k, v in cols.items() if k != "joints"} | {"joints": "joints"}
+    return {"totals": {"clips": N, "frames": F, "joints": int(total_joints)},
+            "summary": summary, "tables": tables, "summary_columns": summary_cols,
+            "summary_count": "frames"}
