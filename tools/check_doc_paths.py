@@ -25,7 +25,9 @@ def candidates(text: str) -> list[str]:
     names = []
     for token in re.findall(r"`([^`\s]+)`", text):
         token = token.rstrip(".,:;")
-        if token.startswith(("bsp_fast.", "bsp::", "-", "$")) or any(c in token for c in "(*<="):
+        # build/...: made by the build, not in a fresh clone
+        if token.startswith(("bsp_fast.", "bsp::", "-", "$", "build/")) \
+                or any(c in token for c in "(*<="):
             continue
         if "/" in token or token.endswith(SUFFIXES):
             names.append(token)
