@@ -92,3 +92,23 @@ def test_auroc_and_ap_are_exact_in_float64():
     assert T.auroc(s2, t2) == 3.5 / 4
     # AP over distinct thresholds: 0.9 (1/1, recall 1/2), 0.5 (2/3, recall 1)
     assert T.average_precision(s2, t2) == pytest.approx(0.5 * 1 + 0.5 * 2 / 3, rel=1e-15)
+
+
+def test_flops_of_lstms_and_transformers_are_counted():
+    # the fused LSTM kernel and the transformer's inference fast path are invisible to
+    # FlopCounterMode (both counted 0 before): products from the shapes, by hand
+    from bsp_fast.models.cost import flops_per_clip
+
+    lstm = torch.nn.LSTM(10, 20, num_layers=2, batch_first=True)
+    B, T = 3, 7
+    per_step = 2 * 4 * 20 * (10 + 20) + 2 * 4 * 20 * (20 + 20)
+    assert flops_per_clip(lstm, {"inputs": torch.zeros(B, T, 10)}) == T * per_step
+    bi = torch.nn.LSTM(10, 20, batch_first=True, bidirectional=True)
+    assert flops_per_clip(bi, {"inputs": torch.zeros(B, T, 10)}) == T * 2 * 2 * 4 * 20 * 30
+    layer = torch.nn.TransformerEncoderLayer(16, 2, 32, batch_first=True)
+    enc = torch.nn.TransformerEncoder(layer, 1, enable_nested_tensor=False)
+    S = 5
+    # q,k,v and out projections 4 x 16x16, scores and weighted sum 2 x S x 16, FFN 16x32x2
+    per_token = 2 * (4 * 16 * 16 + 2 * S * 16 + 2 * 16 * 32)
+    assert flops_per_clip(enc, {"inputs": torch.zeros(2, S, 16)}) == S * per_token
+    assert torch.backends.mha.get_fastpath_enabled()  # restored
