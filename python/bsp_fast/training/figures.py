@@ -131,6 +131,9 @@ def draw_figures(tab: dict, res: dict, out_dir=None) -> list:
             for xi, _, _, vals in points:
                 ax.scatter([xi] * len(vals), vals, s=8, color=line.get_color(), alpha=0.6)
         spec = tab["metrics"][fig["metric"]]
+        values = [v for _, pts in series for p in pts for v in p[3]]
+        if min(values) >= 0.0 and max(values) <= 1.0:  # a fraction: its whole range
+            ax.set_ylim(-0.02, 1.02)
         ax.set_xlabel({"mjp": "missing-joint probability (MJP)",
                        "noise": "input noise σ (px)"}[fig["x"]])
         ax.set_ylabel(f"test {spec['label']}")
