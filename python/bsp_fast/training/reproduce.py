@@ -166,7 +166,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "bsp-train, then print our table beside the report's numbers with each of the "
                     "report's findings marked reproduced / not reproduced (from the numbers).",
         epilog="tables: " + ", ".join(table_names()) + ". Budgets: smoke (1 epoch, 2 batches: plumbing "
-               "only), quick (2-core CPU, < 30 min per table on bsp-synth data), full (the "
+               "only), quick (2-core CPU on bsp-synth data; costs in each table file), full (the "
                "report's epochs, GPU). Exit codes: 0 done, 1 a run failed or bad data, 2 bad "
                "arguments. docs: docs/reproduce.md")
     p.add_argument("table", metavar="TABLE", nargs="?",
