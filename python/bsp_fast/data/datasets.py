@@ -216,7 +216,8 @@ class ClipDataset(SplitDataset):
         else:
             inputs = pixels
         n = T.normalize_hips_neck(inputs, vis)
-        out = dict(inputs=n.points, visible=n.visible, shift=n.shift, scale=n.scale)
+        out = dict(inputs=n.points, visible=n.visible, shift=n.shift, scale=n.scale,
+                   normaliser_fallback=n.fallback)
         if self.with_pixels:
             out["pixels"] = pixels
         if self.task == "autoencoder":

@@ -231,8 +231,10 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
 
 def main_seeds(tab: dict, ns, rows, overrides) -> int:
     """``bsp-reproduce ... --seeds N``: trains, prints the table, writes ``results.md``,
-    ``results.json`` (per-seed values, intervals, marks) and ``curves.png``."""
+    ``results.json`` (per-seed values, intervals, marks), ``curves.png`` and the table's
+    ``figures``."""
     from ..atomic import write_text
+    from .figures import draw_figures
     from .seeds import learning_curves, reproduce_seeds
 
     res = reproduce_seeds(tab, ns.data, ns.budget, ns.out, seeds=ns.seeds,
@@ -247,8 +249,11 @@ def main_seeds(tab: dict, ns, rows, overrides) -> int:
     print(text)
     base = Path(res["dir"])
     curves = learning_curves(tab, res)
+    figures = draw_figures(tab, res)  # the table's own figures (``figures:``)
     write_text(base / "results.md", text)
-    write_text(base / "results.json", json.dumps({**res, "findings": found}, indent=1,
-                                                 default=str))
-    print(f"wrote {base / 'results.md'}" + (f" and {curves}" if curves else ""))
+    write_text(base / "results.json", json.dumps({**res, "findings": found,
+                                                  "figures": [str(f) for f in figures]},
+                                                 indent=1, default=str))
+    print(f"wrote {base / 'results.md'}" + (f" and {curves}" if curves else "")
+          + "".join(f", {f}" for f in figures))
     return 0

@@ -19,10 +19,11 @@ from pathlib import Path
 from . import config as C
 from ..atomic import write_text
 from .runs import RunError, read_run, resumable
+from .figures import draw_figures
 from .findings import NA, NO, YES, evaluate_findings, format_value
 from .table_files import (BUDGETS, KINDS, RELATIONS, TABLES, experiments_dir, experiments_dirs,
                           load_table, prepare_row_data, row_options, settings_cells,
-                          table_header, wanted_rows)
+                          table_header, table_names, wanted_rows)
 from .tasks.classification import constant_f1
 
 # (table files and findings live in .table_files and .findings; their names stay here)
@@ -164,8 +165,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run every row of one of the report's tables (experiments/TABLE.yaml) with "
                     "bsp-train, then print our table beside the report's numbers with each of the "
                     "report's findings marked reproduced / not reproduced (from the numbers).",
-        epilog="tables: " + ", ".join(TABLES) + ". Budgets: smoke (1 epoch, 2 batches: plumbing "
-               "only), quick (2-core CPU, < 30 min per table on bsp-synth data), full (the "
+        epilog="tables: " + ", ".join(table_names()) + ". Budgets: smoke (1 epoch, 2 batches: plumbing "
+               "only), quick (2-core CPU on bsp-synth data; costs in each table file), full (the "
                "report's epochs, GPU). Exit codes: 0 done, 1 a run failed or bad data, 2 bad "
                "arguments. docs: docs/reproduce.md")
     p.add_argument("table", metavar="TABLE", nargs="?",
@@ -237,12 +238,14 @@ def main(argv=None) -> int:
     text = format_report(tab, res)
     print(text)
     base = Path(res["dir"])
+    figures = draw_figures(tab, res)  # the table's own figures (``figures:``)
     for name, content in (("results.md", text),
                           ("results.json", json.dumps(
-                              {**res, "findings": evaluate_findings(tab, res["results"])},
+                              {**res, "findings": evaluate_findings(tab, res["results"]),
+                               "figures": [str(f) for f in figures]},
                               indent=1, default=str))):
         write_text(base / name, content)
-    print(f"wrote {base / 'results.md'}")
+    print(f"wrote {base / 'results.md'}" + "".join(f", {f}" for f in figures))
     return 0
 
 

@@ -4,7 +4,9 @@ The metrics and how a model's output is scored belong to the task objects
 (``bsp_fast.training.tasks``); :class:`TaskMetrics` holds a task's torchmetrics states,
 the loss and the reduction. Every value is a global sum over the split divided by a
 global count (torchmetrics states, reduced over DDP processes), never a mean of batch
-means. ``loss`` is the model's loss averaged over clips. See docs/training.md, Metrics.
+means. ``loss`` is the model's loss averaged over clips; ``normaliser_fallback`` (2D-input
+tasks) the share of input frames normalised by their joint bbox. See docs/training.md,
+Metrics.
 """
 from __future__ import annotations
 
@@ -35,6 +37,8 @@ class TaskMetrics(torch.nn.Module):
         # ModuleDict keys cannot hold "."; keep the metric keys beside them
         self._keys = {k.replace(".", "_"): k for k in modules}
         self.scores = torch.nn.ModuleDict({k.replace(".", "_"): m for k, m in modules.items()})
+        #: share of input frames normalised by the bbox fallback (2D-input tasks)
+        self.fallback = None if self.spec.image_inputs else MeanMetric()
 
     def update_loss(self, loss: torch.Tensor, n: int) -> None:
         loss = loss.detach().float()
@@ -45,6 +49,8 @@ class TaskMetrics(torch.nn.Module):
     def update(self, output: torch.Tensor, batch: dict, model) -> None:
         by_key = {self._keys[k]: m for k, m in self.scores.items()}
         self.spec.update_metrics(by_key, output.detach().float(), batch, model)
+        if self.fallback is not None and "normaliser_fallback" in batch:
+            self.fallback.update(batch["normaliser_fallback"].reshape(-1).float())
 
     def compute(self) -> dict:
         out = {"loss": float(self.loss.compute()) if self.loss.update_count else float("nan")}
@@ -56,9 +62,13 @@ class TaskMetrics(torch.nn.Module):
                 out.update({k: float(v) for k, v in value.items()})
             else:
                 out[self._keys[name]] = float(value)
+        if self.fallback is not None and self.fallback.update_count:
+            out["normaliser_fallback"] = float(self.fallback.compute())
         return out
 
     def reset(self) -> None:
         self.loss.reset()
         for metric in self.scores.values():
             metric.reset()
+        if self.fallback is not None:
+            self.fallback.reset()

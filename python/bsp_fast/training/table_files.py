@@ -4,26 +4,34 @@ resolved ``bsp-train`` options. See docs/reproduce.md.
 
 A table file holds ``common`` options, ``budgets`` (smoke / quick / full option sets),
 ``rows`` (a name, a label, the row's own options, optionally the report's values),
-``findings`` and ``budget_rule`` (the training rule every row follows, in words).
+``findings`` and ``budget_rule`` (the training rule every row follows, in words); the
+ablation tables also use ``own_updates`` (a row's own update cap, with its reason),
+``data_suffix`` (a row reads a sibling dataset: ``--data`` plus the suffix; the table's
+``data_variants`` says how to make each) and ``figures`` (:mod:`.figures`).
 """
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 from . import config as C
+from .figures import check_figures
 from .tasks import get_task
 
 __all__ = ["wanted_rows", "table_header", "settings_cells", "TABLES", "BUDGETS", "KINDS",
            "RELATIONS", "RULE_KEYS", "experiments_dirs", "experiments_dir", "load_table",
            "row_options", "check_budget_rule", "rows_of", "ROW_CROP_BOXES", "row_crop_box",
-           "prepare_row_data"]
+           "prepare_row_data", "UPDATE_KEYS", "row_data", "table_names"]
 
 TABLES = ("lifting", "classification", "autoencoder", "pose_estimation")
 BUDGETS = ("smoke", "quick", "full")
 KINDS = ("order", "compare", "drop", "fails", "robuster", "at_least", "beats_initial")
 RELATIONS = (">", ">=", "<", "<=")
 RULE_KEYS = ("epochs", "max_steps", "early_stop", "limit_batches", "batch_size")
+#: the budget-rule options a row with an ``own_updates`` reason may set for a budget (its
+#: cap of updates and patience, e.g. the original's batch-1 update count at batch 64)
+UPDATE_KEYS = ("epochs", "max_steps", "early_stop")
 #: Crop boxes a pose-estimation row may ask for (``crop_box:`` beside its options): mask
 #: boxes (the default, every row's protocol) or the union with the ground-truth joint box,
 #: only as an upper bound in a row of its own.
@@ -33,7 +41,9 @@ ROW_CROP_BOXES = ("mask", "mask+joints")
 def check_budget_rule(tab: dict) -> None:
     """One budget rule per table: the table states it (``budget_rule``), and no row changes
     the epochs, update cap, patience or batch limit of a budget; a row may use its own
-    batch size only with an ``own_batch_size`` reason (the same update cap then applies)."""
+    batch size only with an ``own_batch_size`` reason (the same update cap then applies),
+    its own ``epochs``/``max_steps``/``early_stop`` only with an ``own_updates`` reason
+    (which the table's ``budget_rule`` states)."""
     where = tab.get("path", tab.get("table"))
     if not isinstance(tab.get("budget_rule"), str) or not tab["budget_rule"].strip():
         raise ValueError(f"{where}: missing key 'budget_rule' (the table's training rule, "
@@ -43,10 +53,13 @@ def check_budget_rule(tab: dict) -> None:
             for key in set(opts or {}) & set(RULE_KEYS):
                 if key == "batch_size" and row.get("own_batch_size"):
                     continue
+                if key in UPDATE_KEYS and row.get("own_updates"):
+                    continue
                 raise ValueError(
                     f"{where}: row {row['name']!r} sets {key!r} for budget {budget!r}: every "
                     f"row of a table follows its budget rule ({', '.join(RULE_KEYS)} are the "
-                    "budget's; a row's own batch_size needs an own_batch_size reason)")
+                    "budget's; a row's own batch_size needs an own_batch_size reason, its "
+                    f"own {'/'.join(UPDATE_KEYS)} an own_updates reason)")
         if set(RULE_KEYS) & set(row.get("options") or {}):
             raise ValueError(f"{where}: row {row['name']!r} sets budget options "
                              f"{sorted(set(RULE_KEYS) & set(row['options']))} in 'options'")
@@ -71,14 +84,22 @@ def experiments_dir() -> Path:
     return next((d for d in dirs if d.is_dir()), dirs[-1])
 
 
+def table_names() -> list:
+    """The report's :data:`TABLES`, then the other table files of :func:`experiments_dirs`
+    (the ablations), by name."""
+    extra = sorted({p.stem for d in experiments_dirs() if d.is_dir()
+                    for p in d.glob("*.yaml")} - set(TABLES))
+    return list(TABLES) + extra
+
+
 def load_table(table) -> dict:
-    """A table by name (one of :data:`TABLES`) or a path to its YAML file, checked."""
+    """A table by name (one of :func:`table_names`) or a path to its YAML file, checked."""
     import yaml
 
     path = Path(table)
     if path.suffix not in (".yaml", ".yml"):
-        if str(table) not in TABLES:
-            raise ValueError(f"unknown table {table!r}; allowed: {', '.join(TABLES)} "
+        if str(table) not in table_names():
+            raise ValueError(f"unknown table {table!r}; allowed: {', '.join(table_names())} "
                              "(or a path to a table YAML)")
         dirs = experiments_dirs()
         path = next((d / f"{table}.yaml" for d in dirs if (d / f"{table}.yaml").is_file()),
@@ -105,6 +126,11 @@ def load_table(table) -> dict:
     if len(set(names)) != len(names):
         raise ValueError(f"{path}: duplicate row names in {names}")
     for r in doc["rows"]:
+        suffix = r.get("data_suffix")
+        if suffix is not None and (not isinstance(suffix, str)
+                                   or not re.fullmatch(r"[-_.A-Za-z0-9]+", suffix)):
+            raise ValueError(f"{path}: row {r['name']!r}: data_suffix {suffix!r}; a suffix of "
+                             "letters, digits, '-', '_' or '.' appended to --data")
         if "crop_box" in r and (doc["task"] != "pose_estimation" or r["crop_box"] not in ROW_CROP_BOXES):
             raise ValueError(f"{path}: row {r['name']!r}: crop_box {r['crop_box']!r}; a "
                              f"pose_estimation row may ask for one of {list(ROW_CROP_BOXES)}")
@@ -124,7 +150,21 @@ def load_table(table) -> dict:
                              f"is not one of {list(doc['metrics'])}")
     doc["path"] = str(path)
     check_budget_rule(doc)
+    check_figures(doc)
     return doc
+
+
+def row_data(data, row: dict) -> str:
+    """Where a row reads: ``data``, or with the row's ``data_suffix`` the sibling dataset
+    ``data + suffix`` (``d/medium-poses`` -> ``d/medium-poses-bones5``; a file
+    ``d/clips.h5`` -> ``d/clips-bones5.h5``)."""
+    suffix = row.get("data_suffix")
+    if not suffix:
+        return str(data)
+    p = Path(data)
+    if p.suffix in (".h5", ".hdf5"):
+        return str(p.with_name(p.stem + suffix + p.suffix))
+    return str(p.with_name(p.name + suffix))
 
 
 def row_crop_box(table: dict, row: dict) -> str | None:
@@ -143,6 +183,11 @@ def prepare_row_data(table: dict, row: dict, opts: dict, convert: bool = True) -
     to convert). A dataset directory is converted by bsp-train with the default (mask
     boxes); a row that asks for ``mask+joints`` gets its own cached conversion here, and
     its ``data`` becomes that file."""
+    if convert and row.get("data_suffix") and not Path(opts["data"]).exists():
+        make = (table.get("data_variants") or {}).get(row["data_suffix"])
+        raise ValueError(f"table {table['table']!r} row {row['name']!r} reads {opts['data']} "
+                         f"(--data + data_suffix {row['data_suffix']!r}), which does not "
+                         "exist" + (f"; make it with: {make}" if make else ""))
     want = row_crop_box(table, row)
     if want is None:
         return opts
@@ -192,7 +237,7 @@ def row_options(table: dict, row: dict, budget: str, data, run_dir, overrides=No
     opts.update(row.get("options") or {})
     opts.update((row.get("budgets") or {}).get(budget) or {})
     opts.update(overrides or {})
-    opts.update(data=str(data), out=str(run_dir))
+    opts.update(data=row_data(data, row), out=str(run_dir))
     return C.normalise(opts, f"{table['table']} row {row['name']!r}")
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Metric", "Task", "UNIT_SUFFIX"]
+__all__ = ["Metric", "Task", "UNIT_SUFFIX", "NORMALISER_FALLBACK"]
 
 #: Table/curve label suffix of a metric's display unit.
 UNIT_SUFFIX = {"mm": " (mm)", "mm/frame": " (mm/frame)", "%": " (%)", "": ""}
@@ -53,6 +53,13 @@ class Metric:
         return 100.0 * value if self.percent else value
 
 
+#: Share of input frames whose hips-neck normaliser fell back to the joint bbox (hips or
+#: neck missing, or coinciding): scored by every 2D-input task (``normaliser_fallback`` in
+#: the batch), logged as ``train/``, ``val/`` and ``test/normaliser_fallback``.
+NORMALISER_FALLBACK = Metric("normaliser_fallback", "normaliser fallback", "fraction", "none",
+                             "pct")
+
+
 class Task:
     """Base of the four task objects (see the module docstring). Subclasses set the class
     attributes and implement :meth:`metric_modules`, :meth:`update_metrics` and
@@ -87,17 +94,24 @@ class Task:
         return f"<task {self.name!r}>"
 
     # ------------------------------------------------------------------ declarations
+    @property
+    def declared(self) -> tuple:
+        """Every metric the task may save: ``metrics``, ``extra_metrics`` and, for 2D
+        inputs, :data:`NORMALISER_FALLBACK`."""
+        return self.metrics + self.extra_metrics + (() if self.image_inputs
+                                                    else (NORMALISER_FALLBACK,))
+
     def metric(self, key: str) -> Metric:
-        for m in self.metrics + self.extra_metrics:
+        for m in self.declared:
             if m.key == key:
                 return m
         raise ValueError(f"task {self.name!r} has no metric {key!r}; allowed: "
-                         + ", ".join(m.key for m in self.metrics + self.extra_metrics))
+                         + ", ".join(m.key for m in self.declared))
 
     @property
     def units(self) -> dict:
         """``{metric key: unit}`` of metrics.json."""
-        return {m.key: m.unit for m in self.metrics + self.extra_metrics}
+        return {m.key: m.unit for m in self.declared}
 
     def table_columns(self) -> tuple:
         """``(header, where, key, format)``; where ``c``: a config value, ``m``: a metric."""

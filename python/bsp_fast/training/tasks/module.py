@@ -12,6 +12,7 @@ whatever task it was.
 """
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import lightning.pytorch as pl
@@ -56,6 +57,7 @@ class TaskModule(pl.LightningModule):
         from torchmetrics import MeanMetric
 
         self.train_loss = MeanMetric()
+        self.train_fallback = MeanMetric()  # share of bbox-normalised input frames
         self.val_metrics = TaskMetrics(self.task)
         self.test_metrics = TaskMetrics(self.task)
         self.results: dict = {}  # the last computed {"val": {...}, "test": {...}}
@@ -77,6 +79,8 @@ class TaskModule(pl.LightningModule):
         loss = self.net.loss(output, batch)
         n = self.spec.batch_size(batch)
         self.train_loss.update(loss.detach().float(), n)
+        if "normaliser_fallback" in batch:
+            self.train_fallback.update(batch["normaliser_fallback"].reshape(-1).float())
         self.log("loss", loss.detach(), prog_bar=True, logger=False, on_step=True,
                  on_epoch=False, batch_size=n)
         return loss
@@ -124,10 +128,25 @@ class TaskModule(pl.LightningModule):
             self.log("val_loss", float(values["loss"]), prog_bar=True, logger=False,
                      sync_dist=True)
 
+    def on_fit_start(self) -> None:
+        self._clock0 = (time.process_time(), time.perf_counter())
+
     def on_train_epoch_end(self) -> None:
+        # cost so far, this epoch's validation included (it runs before this hook): the
+        # optimiser updates, CPU seconds of this process (all its threads) and wall seconds
+        # since fit started (a resumed run counts its seconds from its resume)
+        self.log("cost/updates", float(self.global_step), sync_dist=True)
+        cpu0, wall0 = getattr(self, "_clock0", (None, None))
+        if cpu0 is not None:
+            self.log("cost/cpu_s", time.process_time() - cpu0, sync_dist=True)
+            self.log("cost/wall_s", time.perf_counter() - wall0, sync_dist=True)
         if self.train_loss.update_count:
             self.log("train/loss", float(self.train_loss.compute()), sync_dist=True)
         self.train_loss.reset()
+        if self.train_fallback.update_count:
+            self.log("train/normaliser_fallback", float(self.train_fallback.compute()),
+                     sync_dist=True)
+        self.train_fallback.reset()
 
     def on_validation_epoch_end(self) -> None:
         if not self.trainer.sanity_checking:
