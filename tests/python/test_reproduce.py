@@ -5,6 +5,7 @@ agree with its own numbers."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import re
 
 import h5py
@@ -205,7 +206,8 @@ def test_smoke_run_prints_table_and_consistent_marks(table, data, tmp_path, caps
     lines = [ln for ln in text.splitlines() if ln.startswith("| ")]
     header = [c.strip() for c in lines[0].strip("|").split("|")]
     labels = [tab["metrics"][m]["label"] for m in tab["metrics"]]
-    assert header[:2] == ["row", "model"] and header[-1] == "epochs (best/run)"
+    assert header[:2] == ["row", "model"] and header[-4] == "epochs (best/run)"
+    assert header[-3:] == ["params", "MFLOPs/clip", "fit min (wall; CPU)"]
     assert all(label in header for label in labels)
     ran = list(saved["results"])
     expect = SMOKE_ROWS[table].split(",") if SMOKE_ROWS[table] else [r["name"] for r in tab["rows"]]
@@ -216,6 +218,16 @@ def test_smoke_run_prints_table_and_consistent_marks(table, data, tmp_path, caps
         m = next(iter(tab["metrics"]))
         col = header.index(tab["metrics"][m]["label"])
         assert cells[col] == R.format_value(tab, m, saved["results"][name]["metrics"][m])
+        if saved["results"][name]["epochs"] is not None:  # the cost of the row's own model
+            from bsp_fast.models.cost import parameter_count
+            from bsp_fast.training.tasks import load_module
+
+            run = Path(saved["results"][name]["run"])
+            net = load_module(run / "checkpoints" / "best.ckpt").net
+            assert cells[-3] == f"{parameter_count(net):,}"
+            assert float(cells[-2].replace(",", "")) > 0
+            seconds = json.loads((run / "metrics.json").read_text())["seconds"]
+            assert cells[-1] == f"{seconds['fit'] / 60:.1f}; {seconds['fit_cpu'] / 60:.1f}"
     marks = {f["text"]: f["status"] for f in saved["findings"]}
     assert marks == {f["text"]: f["status"] for f in R.evaluate_findings(tab, saved["results"])}
     for f in tab["findings"]:  # every finding is printed, with the status the numbers give

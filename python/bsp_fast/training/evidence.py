@@ -204,7 +204,10 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
     baseline, epochs per seed; then the findings with their difference, interval, mark."""
     from .table_files import settings_cells, table_header
 
+    from .cost_columns import COST_HEADER, cost_cells
+
     header, metrics, reported, settings = table_header(tab, "epochs (best/run) per seed")
+    header += COST_HEADER
     rows = []
     for row in tab["rows"]:
         r = res["results"].get(row["name"])
@@ -216,8 +219,12 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
         cells += [_cell(tab, m, r) for m in metrics]
         cells += [_num(tab, m, (row.get("report") or {}).get(m)) for m in reported]
         cells.append(_num(tab, metrics[0], r["initial"].get(metrics[0])))
-        cells.append("–" if r.get("source") == "initial" else ", ".join(
+        trained = r.get("source") != "initial"
+        cells.append("–" if not trained else ", ".join(
             f"{s['best_epoch']}/{s['epochs']}" for s in r["seeds"].values()))
+        cells += cost_cells([s.get("run") for s in r["seeds"].values()],
+                            [s.get("seconds") for s in r["seeds"].values()]) if trained \
+            else ["–"] * len(COST_HEADER)
         rows.append(cells)
     n = len(res.get("seeds") or [])
     split = "seed varied with the seed" if res.get("split_seeds") else "fixed"

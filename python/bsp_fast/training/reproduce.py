@@ -137,7 +137,10 @@ def _md(header, rows) -> str:
 
 def format_report(tab: dict, res: dict) -> str:
     """Markdown: our table with the report's values beside it, then the findings."""
+    from .cost_columns import COST_HEADER, cost_cells
+
     header, metrics, reported, settings = table_header(tab, "epochs (best/run)")
+    header += COST_HEADER
     rows = []
     for row in tab["rows"]:
         r = res["results"].get(row["name"])
@@ -150,6 +153,8 @@ def format_report(tab: dict, res: dict) -> str:
         cells += [format_value(tab, m, (row.get("report") or {}).get(m)) for m in reported]
         cells.append(format_value(tab, metrics[0], r["initial"].get(metrics[0])))
         cells.append("–" if r["epochs"] is None else f"{r['best_epoch']}/{r['epochs']}")
+        cells += ["–"] * len(COST_HEADER) if r["epochs"] is None else \
+            cost_cells([r["run"]], [r["seconds"]])
         rows.append(cells)
     found = evaluate_findings(tab, res["results"])
     text = [f"### {tab['title']} — budget {res['budget']}", "", _md(header, rows), "",

@@ -1,0 +1,52 @@
+"""The cost columns of the reproduced tables: parameters and forward FLOPs per clip of a
+row's model (``bsp_fast.models.cost``, counted on a few test clips of the run's own HDF5
+file) and its training time (``metrics.json``: wall seconds of ``fit``, and process CPU
+seconds where the run recorded them)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .runs import read_run
+
+__all__ = ["COST_HEADER", "run_cost", "cost_cells"]
+
+COST_HEADER = ["params", "MFLOPs/clip", "fit min (wall; CPU)"]
+
+
+def run_cost(run_dir) -> dict:
+    """``{"parameters", "flops_per_clip"}`` of a finished run's best checkpoint (empty when
+    its data file is gone)."""
+    from ..data import ClipDataset
+    from ..models.cost import flops_per_clip, parameter_count
+    from .tasks import get_task, load_module
+
+    run_dir = Path(run_dir)
+    if not (run_dir / "checkpoints" / "best.ckpt").is_file():
+        return {}
+    cfg = read_run(run_dir)["config"]
+    h5 = (cfg.get("resolved") or {}).get("h5")
+    if not h5 or not Path(h5).is_file():
+        return {}
+    module = load_module(run_dir / "checkpoints" / "best.ckpt")
+    net = module.net
+    options = get_task(cfg["task"]).dataset_options(cfg)
+    ds = ClipDataset(h5, "test", cfg["task"], **options)
+    batch = ds[:min(4, len(ds))]
+    return {"parameters": parameter_count(net), "flops_per_clip": flops_per_clip(net, batch)}
+
+
+def cost_cells(run_dirs: list, seconds: list) -> list:
+    """The three cost cells of a row: from its first run's model, and the mean training
+    time over its runs (``seconds``: their ``metrics.json`` seconds)."""
+    run_dirs = [d for d in run_dirs if d]
+    cost = run_cost(run_dirs[0]) if run_dirs else {}
+    params = f"{cost['parameters']:,}" if cost else "–"
+    flops = f"{cost['flops_per_clip'] / 1e6:,.1f}" if cost else "–"
+    fits = [s["fit"] for s in seconds if s and s.get("fit") is not None]
+    cpus = [s["fit_cpu"] for s in seconds if s and s.get("fit_cpu") is not None]
+    if not fits:
+        return [params, flops, "–"]
+    t = f"{sum(fits) / len(fits) / 60:.1f}"
+    if len(cpus) == len(fits):
+        t += f"; {sum(cpus) / len(cpus) / 60:.1f}"
+    return [params, flops, t]
