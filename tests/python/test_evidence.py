@@ -6,6 +6,7 @@ error)."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import re
 
 import h5py
@@ -347,3 +348,36 @@ def test_split_seeds_set_the_converters_split_seed(tmp_path, capsys):
     # split_seed shuffles the clips inside each split: the same test recordings
     assert tests["22742"] == tests["22743"]
     capsys.readouterr()
+
+
+def test_cell_interval_is_that_of_the_mean_over_seeds(tmp_path):
+    # two seeds on the same 40 recordings: one right on 90 % of its joints, one on 10 %,
+    # with different denominators, so the pooled ratio (sum num / sum den over seeds) is
+    # not the mean of the seeds' values; the cell is the mean and its interval must hold it
+    tab = R.load_table("autoencoder")
+    m = next(iter(tab["metrics"]))
+    rng = np.random.default_rng(7)
+    recs = [f"rec{i}/0_0" for i in range(40)]
+    seeds, values = {}, []
+    for seed, share, scale in (("1", 0.9, 1.0), ("2", 0.1, 5.0)):
+        den = rng.integers(10, 60, 40).astype(float) * scale
+        num = den * np.clip(share + rng.normal(0, 0.05, 40), 0, 1)
+        path = tmp_path / f"s{seed}.json"
+        sec = {"recordings": recs, "metrics": {k: {"num": num.tolist(), "den": den.tolist()}
+                                               for k in tab["metrics"]}}
+        path.write_text(json.dumps({"test": sec, "initial": sec, "empty": {}}))
+        values.append(num.sum() / den.sum())
+        seeds[seed] = {"metrics": {k: values[-1] for k in tab["metrics"]},
+                       "initial": {k: values[-1] for k in tab["metrics"]},
+                       "per_recording": str(path), "epochs": 1, "best_epoch": 1}
+    res = E.summarise(tab, {"table": tab["table"], "budget": "smoke", "seeds": [1, 2],
+                            "results": {"r": {"seeds": seeds, "source": "test"}}})
+    r = res["results"]["r"]
+    mean = float(np.mean(values))
+    low, high = r["interval"][m]
+    pooled = sum(float(np.sum(json.loads(Path(s["per_recording"]).read_text())["test"]
+                              ["metrics"][m]["num"])) for s in seeds.values()) / sum(
+        float(np.sum(json.loads(Path(s["per_recording"]).read_text())["test"]["metrics"][m]
+                     ["den"])) for s in seeds.values())
+    assert r["metrics"][m] == pytest.approx(mean)
+    assert low < mean < high and not low < pooled < high  # pooled is near 0.23, mean 0.5

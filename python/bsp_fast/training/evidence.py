@@ -60,6 +60,49 @@ class _Sums:
         empty = docs[0].get("empty", {}).get(metric)
         return (*U.pool(parts, metric), float("nan") if empty is None else empty)
 
+    def per_seed(self, row: str, metric: str, initial: bool = False):
+        """``[(recordings, num, den, empty), ...]``, one per seed of ``row``, when every seed
+        was tested on the same recordings (the split fixed); else None (the caller pools)."""
+        r = self.res["results"][row]
+        section = "initial" if (initial or r.get("source") == "initial") else "test"
+        out = []
+        for s in r["seeds"].values():
+            if not s.get("per_recording"):
+                return None
+            d = self._doc(s["per_recording"])
+            part = d.get(section)
+            if not part or metric not in part["metrics"]:
+                return None
+            empty = d.get("empty", {}).get(metric)
+            out.append((*U.pool([part], metric), float("nan") if empty is None else empty))
+        recordings = {tuple(o[0]) for o in out}
+        return out if len(recordings) == 1 else None
+
+
+def _seed_mean(counts: list, fn):
+    """``fn`` of the per-row means over seeds: ``values`` holds each row's seeds in turn
+    (``counts`` of them per row)."""
+    def stat(values):
+        means, i = [], 0
+        for c in counts:
+            means.append(np.mean(np.stack([np.asarray(v) for v in values[i:i + c]]), axis=0))
+            i += c
+        return fn(means)
+    return stat
+
+
+def _seed_interval(sums: "_Sums", parts: list, fn):
+    """The bootstrap interval of ``fn`` of the rows' **means over seeds** (the tables'
+    cells), resampling the test recordings jointly for every row and seed; None when a row
+    has no per-recording sums or its seeds saw different recordings (``--split-seeds``)."""
+    per = [sums.per_seed(row, metric, initial) for row, metric, initial in parts]
+    if any(p is None for p in per):
+        return None
+    flat = [s for p in per for s in p]
+    _, aligned = U.align([s[:3] for s in flat])
+    return U.paired_interval(aligned, _seed_mean([len(p) for p in per], fn),
+                             empty=[s[3] for s in flat])
+
 
 def _values(r: dict, metric: str) -> list:
     key = "initial" if r.get("source") == "initial" else "metrics"
@@ -69,8 +112,9 @@ def _values(r: dict, metric: str) -> list:
 def summarise(tab: dict, res: dict) -> dict:
     """Adds to each row of ``res["results"]`` (from :func:`seeds.reproduce_seeds`):
     ``metrics`` and ``initial`` (means over seeds), ``std`` (sample std over seeds, None
-    for one seed) and ``interval`` (``[low, high]`` over test recordings, pooled over
-    seeds) per metric of the table. Returns ``res``."""
+    for one seed) and ``interval`` (``[low, high]``: the bootstrap interval of the mean over
+    seeds, the test recordings resampled jointly for every seed; with ``--split-seeds``, of
+    the ratio pooled over seeds) per metric of the table. Returns ``res``."""
     sums = _Sums(res)
     for name, r in res["results"].items():
         r["metrics"], r["std"], r["interval"], r["initial"] = {}, {}, {}, {}
@@ -78,9 +122,11 @@ def summarise(tab: dict, res: dict) -> dict:
             vals = _values(r, m)
             r["metrics"][m] = float(np.mean(vals)) if vals else None
             r["std"][m] = float(np.std(vals, ddof=1)) if len(vals) > 1 else None
-            p = sums.pooled(name, m)
-            if p is not None:
+            iv = _seed_interval(sums, [(name, m, False)], lambda v: v[0])
+            p = sums.pooled(name, m) if iv is None else None
+            if p is not None:  # seeds on different splits: the pooled ratio's interval
                 iv = U.ratio_interval(p[1], p[2], empty=p[3])
+            if iv is not None:
                 r["interval"][m] = [iv.low, iv.high]
             init = [s["initial"].get(m) for s in r["seeds"].values()
                     if s["initial"].get(m) is not None]
@@ -91,7 +137,11 @@ def summarise(tab: dict, res: dict) -> dict:
 
 # ---------------------------------------------------------------------- findings
 def _interval(sums: _Sums, parts: list, fn):
-    """``parts``: ``(row, metric, initial)`` each; ``fn(values) -> statistic``."""
+    """``parts``: ``(row, metric, initial)`` each; ``fn(values) -> statistic`` of the
+    rows' means over seeds (pooled over seeds when the seeds' splits differ)."""
+    iv = _seed_interval(sums, parts, fn)
+    if iv is not None:
+        return iv
     pooled = [sums.pooled(row, metric, initial) for row, metric, initial in parts]
     if any(p is None for p in pooled):
         return None
@@ -229,7 +279,10 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
     n = len(res.get("seeds") or [])
     split = "seed varied with the seed" if res.get("split_seeds") else "fixed"
     text = [f"### {tab['title']} — budget {res['budget']}, {n} seeds (split {split})", "",
-            f"Cells: mean ± std over seeds [95 % interval, bootstrap over test recordings]. "
+            "Cells: mean ± std over seeds [95 % interval of the mean, bootstrap over test "
+            "recordings resampled jointly for every seed"
+            + ("; with split seeds, of the ratio pooled over seeds" if res.get("split_seeds")
+               else "") + "]. "
             f"Rule: {tab.get('budget_rule', '').strip()}", "", _md(header, rows), "",
             _md(["finding (report)", "ours: difference [95 % interval]", "report", "status"],
                 [[f["text"], f["ours"], f["report"], f["status"]] for f in findings])]
