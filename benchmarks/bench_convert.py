@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -77,11 +78,14 @@ def run_convert(dataset: Path, out: Path, *extra) -> tuple:
             "print(re.search(r'VmHWM:\\s+(\\d+)', open('/proc/self/status').read()).group(1), "
             "file=sys.stderr); sys.exit(rc)")
     cmd = [sys.executable, "-c", code, str(dataset), str(out), "--force", "--quiet", "--no-media", *extra]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     p = subprocess.run(cmd, check=True, capture_output=True, text=True)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     peak_kib = int(p.stderr.strip().splitlines()[-1])
-    return wall, peak_kib / 1024, os.path.getsize(out) / 1e6
+    return wall, peak_kib / 1024, os.path.getsize(out) / 1e6, cpu
 
 
 def main(argv=None) -> int:
@@ -126,12 +130,16 @@ def convert_table(tmp: Path, args, runs) -> int:
     print(f"\nWhole conversion of {args.rows:,} rows ({size:.2f} GB data.csv, "
           f"{f'generated in {t:.0f} s' if t else 'reused'}), defaults (L = 30), 2 threads, "
           f"bsp_fast from {Path(bf.__file__).parent}, load {os.getloadavg()[0]:.2f}:\n")
-    print("| output | wall s | peak RSS MB | file MB |")
-    print("|---|---:|---:|---:|")
+    # CPU s: user + system time of the child, all threads (less sensitive than the wall
+    # time to other work on the machine, though not immune: caches and memory are shared).
+    print("| output | wall s | CPU s | peak RSS MB | file MB | load before |")
+    print("|---|---:|---:|---:|---:|---:|")
     for label, extra in runs:
         for _ in range(args.repeat):
-            wall, peak, mb = run_convert(full, tmp / "out.h5", *extra)
-            print(f"| {label} | {wall:.2f} | {peak:,.0f} | {mb:,.0f} |", flush=True)
+            load = os.getloadavg()[0]
+            wall, peak, mb, cpu = run_convert(full, tmp / "out.h5", *extra)
+            print(f"| {label} | {wall:.2f} | {cpu:.2f} | {peak:,.0f} | {mb:,.0f} | {load:.2f} |",
+                  flush=True)
     return 0
 
 
