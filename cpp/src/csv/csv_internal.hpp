@@ -195,7 +195,7 @@ inline unsigned append_fraction(const char* f, unsigned int_digits, std::uint64_
   // of x (two correctly rounded steps). If d * (1 - 2^-50) and d * (1 + 2^-50), which
   // bracket x even after their own rounding, round to the same float, x rounds to it too
   // (rounding is monotone): the correctly rounded float, as from_chars gives. Otherwise x
-  // lies within ~2^-50 of a float rounding boundary (about 1 decimal in 10^7): from_chars.
+  // lies within ~2^-50 of a float rounding boundary (~3 decimals in 10^8): from_chars.
   // 1e-19 <= x < 1e18 (or 0): no subnormal float, no overflow.
   const double d = static_cast<double>(w) / kPow10Exact[kf];
   const float v = static_cast<float>(d * (1 + 0x1p-50));
