@@ -125,6 +125,27 @@ def test_deterministic_over_threads_and_seed(ds, tmp_path):
     assert any(not np.array_equal(a[k], c[k]) for k in a if k.endswith("frame_idx"))
 
 
+def test_batches_filled_while_written_give_the_same_values(ds, tmp_path, monkeypatch):
+    """With chunk_clips=1 the 22 clips are written in batches of 4: with 2+ threads each
+    batch is filled while the previous one is written (pose_write.cpp). Every value must
+    equal the one-batch, one-thread conversion's."""
+    ref = read_all(cv.convert(ds, tmp_path / "ref.h5", clip_length=10, threads=1,
+                              media=False)["output"])
+    core_convert = cv.api._core.convert_csv
+    monkeypatch.setattr(cv.api._core, "convert_csv",
+                        lambda csv, tmp, prog, **kw: core_convert(csv, tmp, prog, chunk_clips=1, **kw))
+    for threads in (1, 2, 3):
+        out = cv.convert(ds, tmp_path / f"t{threads}.h5", clip_length=10, threads=threads,
+                         media=False)["output"]
+        with h5py.File(out, "r") as f:
+            assert f["train/targets/world_pose_rot"].chunks[0] == 1  # the option took effect
+        d = read_all(out)
+        assert d.keys() == ref.keys()
+        for k in ref:
+            if k != "attrs":
+                np.testing.assert_array_equal(d[k], ref[k], err_msg=f"{k}, {threads} threads")
+
+
 def test_crossing_column_names_reordered_columns_and_crlf(tmp_path):
     rows = recording(U1, range(40), crossing_from=25)
     base = write_dataset(tmp_path / "base", rows)
