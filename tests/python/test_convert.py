@@ -126,8 +126,8 @@ def test_deterministic_over_threads_and_seed(ds, tmp_path):
 
 
 def test_batches_filled_while_written_give_the_same_values(ds, tmp_path, monkeypatch):
-    """With chunk_clips=1 the 22 clips are written in batches of 4: with 2+ threads each
-    batch is filled while the previous one is written (pose_write.cpp). Every value must
+    """With chunk_clips=1 the 22 clips are written in batches of 2 (2+ threads; each filled
+    while the previous one is written, pose_write.cpp) or of 4 (1 thread). Every value must
     equal the one-batch, one-thread conversion's."""
     ref = read_all(cv.convert(ds, tmp_path / "ref.h5", clip_length=10, threads=1,
                               media=False)["output"])

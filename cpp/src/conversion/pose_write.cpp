@@ -139,11 +139,13 @@ void write_split(const h5::Group& g, const PoseTable& t, const Plan& plan,
                                   f.big && opt.compress ? packed : none));
     shapes.push_back(shape);
   }
-  const std::size_t batch = static_cast<std::size_t>(std::max(opt.chunk_clips, 1)) * 4;
   // Two sets of batch buffers: with 2+ threads, batch k+1 is filled (in parallel) while
   // this thread hands batch k to libhdf5, whose copies into the page cache are a large
   // part of the conversion. The same values are written in the same order either way.
-  const bool overlap = (opt.threads > 0 ? opt.threads : num_threads()) > 1 && N > batch;
+  // Batches of 2 chunks then (4 otherwise): the buffers take the same memory.
+  const std::size_t chunk = static_cast<std::size_t>(std::max(opt.chunk_clips, 1));
+  const bool overlap = (opt.threads > 0 ? opt.threads : num_threads()) > 1 && N > 2 * chunk;
+  const std::size_t batch = chunk * (overlap ? 2 : 4);
   std::array<Buffers, 2> bufs;
   for (int k = 0; k < (overlap ? 2 : 1); ++k) {
     bufs[k].resize(fields.size());
