@@ -112,6 +112,40 @@ class Background {
   std::exception_ptr error_;
 };
 
+// One batch of clips: per field, the filled bytes and (compressed fields) the packed chunks.
+struct Batch {
+  Buffers raw;
+  std::vector<std::vector<std::vector<std::uint8_t>>> packed;  // [field][chunk]
+};
+
+// Packs the chunks of the big fields of the first nb clips of `b` (the last one padded with
+// zeros to a whole chunk, as libhdf5 stores edge chunks), in parallel.
+void pack_chunks(const std::vector<Field>& fields, std::size_t nb, std::size_t rows_per_chunk,
+                 std::size_t L, int level, int threads, Batch& b) {
+  const std::size_t chunks = (nb + rows_per_chunk - 1) / rows_per_chunk;
+  std::vector<std::pair<std::size_t, std::size_t>> jobs;  // (field, chunk)
+  for (std::size_t i = 0; i < fields.size(); ++i) {
+    b.packed[i].resize(fields[i].big ? chunks : 0);
+    for (std::size_t j = 0; fields[i].big && j < chunks; ++j) jobs.emplace_back(i, j);
+  }
+  parallel_for(jobs.size(), 1, [&](std::size_t lo, std::size_t hi) {
+    h5::ChunkPacker packer(level);
+    std::vector<std::uint8_t> padded;
+    for (std::size_t q = lo; q < hi; ++q) {
+      const auto [i, j] = jobs[q];
+      const std::size_t clip_bytes = L * fields[i].per_frame() * fields[i].elem();
+      const std::size_t rows = std::min(rows_per_chunk, nb - j * rows_per_chunk);
+      const std::uint8_t* data = b.raw[i].data() + j * rows_per_chunk * clip_bytes;
+      if (rows < rows_per_chunk) {
+        padded.assign(rows_per_chunk * clip_bytes, 0);
+        std::copy_n(data, rows * clip_bytes, padded.data());
+        data = padded.data();
+      }
+      packer.pack(data, rows_per_chunk * clip_bytes, fields[i].elem(), b.packed[i][j]);
+    }
+  }, threads);
+}
+
 std::string str_at(const StringColumn& c, std::size_t row) {
   return c.values[static_cast<std::size_t>(c.codes[row])];
 }
@@ -146,21 +180,28 @@ void write_split(const h5::Group& g, const PoseTable& t, const Plan& plan,
   const std::size_t chunk = static_cast<std::size_t>(std::max(opt.chunk_clips, 1));
   const bool overlap = (opt.threads > 0 ? opt.threads : num_threads()) > 1 && N > 2 * chunk;
   const std::size_t batch = chunk * (overlap ? 2 : 4);
-  std::array<Buffers, 2> bufs;
+  // With compression, the big fields' chunks are packed (shuffle + deflate) by the worker
+  // threads too, and written as stored (write_chunk): libhdf5's filters would run on this
+  // one thread. The dataset's chunks hold min(chunk, N) clips; batches start on a chunk.
+  const std::size_t rows_per_chunk = std::min<std::size_t>(chunk, N);
+  std::array<Batch, 2> bufs;
   for (int k = 0; k < (overlap ? 2 : 1); ++k) {
-    bufs[k].resize(fields.size());
+    bufs[k].raw.resize(fields.size());
+    bufs[k].packed.resize(fields.size());
     for (std::size_t i = 0; i < fields.size(); ++i)
-      bufs[k][i].resize(batch * static_cast<std::size_t>(L) * fields[i].per_frame() * fields[i].elem());
+      bufs[k].raw[i].resize(batch * static_cast<std::size_t>(L) * fields[i].per_frame() * fields[i].elem());
   }
-  const auto fill = [&](std::size_t c0, Buffers& buf) {
+  const auto fill = [&](std::size_t c0, Batch& buf) {
     const std::size_t nb = std::min<std::size_t>(batch, N - c0);
     parallel_for(nb * static_cast<std::size_t>(L), 256, [&](std::size_t lo, std::size_t hi) {
       for (std::size_t s = lo; s < hi; ++s) {
         const Clip& c = clips[c0 + s / static_cast<std::size_t>(L)];
         const std::size_t row = plan.recordings[c.recording].rows[c.first + s % static_cast<std::size_t>(L)];
-        fill_frame(t, row, buf, s);
+        fill_frame(t, row, buf.raw, s);
       }
     }, opt.threads);
+    if (opt.compress) pack_chunks(fields, nb, rows_per_chunk, static_cast<std::size_t>(L),
+                                  opt.compression_level, opt.threads, buf);
   };
   if (N > 0) fill(0, bufs[0]);
   for (std::size_t c0 = 0, k = 0; c0 < N; c0 += batch, k = overlap ? 1 - k : 0) {
@@ -168,8 +209,17 @@ void write_split(const h5::Group& g, const PoseTable& t, const Plan& plan,
     const std::size_t nb = std::min<std::size_t>(batch, N - c0), next = c0 + batch;
     Background filling;  // joined before the next batch, and on any exception
     if (overlap && next < N) filling.run([&, next, k] { fill(next, bufs[1 - k]); });
-    for (std::size_t i = 0; i < fields.size(); ++i)
-      g.write_rows(ds[i], fields[i].name, fields[i].type, shapes[i], c0, nb, bufs[k][i].data());
+    for (std::size_t i = 0; i < fields.size(); ++i) {
+      if (!(fields[i].big && opt.compress)) {
+        g.write_rows(ds[i], fields[i].name, fields[i].type, shapes[i], c0, nb, bufs[k].raw[i].data());
+        continue;
+      }
+      std::vector<hsize_t> offset(shapes[i].size(), 0);
+      for (std::size_t j = 0; j < bufs[k].packed[i].size(); ++j) {
+        offset[0] = c0 + j * rows_per_chunk;
+        g.write_chunk(ds[i], fields[i].name, offset, bufs[k].packed[i][j]);
+      }
+    }
     filling.join();
     if (next < N && !overlap) fill(next, bufs[0]);
     if (progress) progress->done += nb;
