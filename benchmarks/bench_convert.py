@@ -99,12 +99,16 @@ def main(argv=None) -> int:
                          "(same --rows); the output HDF5 is written there too")
     ap.add_argument("--convert-only", action="store_true",
                     help="only the uncompressed whole conversion (no CSV stage, no --compress)")
+    ap.add_argument("--compressed", action="store_true",
+                    help="with --convert-only: the --compress conversion instead")
     ap.add_argument("--repeat", type=int, default=1, help="time each conversion N times")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
         tmp = Path(args.data) if args.data else Path(tmp)
         if args.convert_only:
-            return convert_table(tmp, args, ((("uncompressed (default)", ()),)))
+            run = (("--compress (shuffle+deflate 1)", ("--compress",)) if args.compressed
+                   else ("uncompressed (default)", ()))
+            return convert_table(tmp, args, (run,))
         small = write_dataset(tmp / "small", args.csv_rows)
         stage = csv_stage(small / "data.csv", args.csv_rows, args.pandas_rows)
         base = stage[0][1]
