@@ -9,12 +9,18 @@ Same run, same generated file (random float32 poses, ~10 KB per row like the rea
    dataset) with `bsp-convert` in a child process: wall time and peak resident memory,
    uncompressed and with --compress (file size, write time).
 
-    python benchmarks/bench_convert.py [--rows 225000] [--csv-rows 20000]
+    PYTHONPATH=python:build/<name>/py python3 benchmarks/bench_convert.py [--rows 225000] [--csv-rows 20000]
+
+To compare two builds side by side, generate the file once and convert it with each build in
+turn (the child process inherits PYTHONPATH, so it runs the build named there):
+
+    python3 benchmarks/bench_convert.py --data /tmp/bench --convert-only --repeat 3
 """
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -72,11 +78,14 @@ def run_convert(dataset: Path, out: Path, *extra) -> tuple:
             "print(re.search(r'VmHWM:\\s+(\\d+)', open('/proc/self/status').read()).group(1), "
             "file=sys.stderr); sys.exit(rc)")
     cmd = [sys.executable, "-c", code, str(dataset), str(out), "--force", "--quiet", "--no-media", *extra]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     p = subprocess.run(cmd, check=True, capture_output=True, text=True)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     peak_kib = int(p.stderr.strip().splitlines()[-1])
-    return wall, peak_kib / 1024, os.path.getsize(out) / 1e6
+    return wall, peak_kib / 1024, os.path.getsize(out) / 1e6, cpu
 
 
 def main(argv=None) -> int:
@@ -85,9 +94,21 @@ def main(argv=None) -> int:
     ap.add_argument("--csv-rows", type=int, default=20_000)
     ap.add_argument("--pandas-rows", type=int, default=2_000)
     ap.add_argument("--dir", default=None, help="work directory (default: a temporary one)")
+    ap.add_argument("--data", default=None,
+                    help="keep the generated datasets in this folder and reuse them when present "
+                         "(same --rows); the output HDF5 is written there too")
+    ap.add_argument("--convert-only", action="store_true",
+                    help="only the uncompressed whole conversion (no CSV stage, no --compress)")
+    ap.add_argument("--compressed", action="store_true",
+                    help="with --convert-only: the --compress conversion instead")
+    ap.add_argument("--repeat", type=int, default=1, help="time each conversion N times")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
-        tmp = Path(tmp)
+        tmp = Path(args.data) if args.data else Path(tmp)
+        if args.convert_only:
+            run = (("--compress (shuffle+deflate 1)", ("--compress",)) if args.compressed
+                   else ("uncompressed (default)", ()))
+            return convert_table(tmp, args, (run,))
         small = write_dataset(tmp / "small", args.csv_rows)
         stage = csv_stage(small / "data.csv", args.csv_rows, args.pandas_rows)
         base = stage[0][1]
@@ -98,15 +119,31 @@ def main(argv=None) -> int:
         print("|---|---:|---:|---:|---:|")
         for name, rps, mbs in stage:
             print(f"| {name} | {rps:,.0f} | {mbs:,.0f} | {rps / base:,.0f}× | {rps / best_py:.1f}× |")
-        t, _ = timed(lambda: write_dataset(tmp / "full", args.rows, seed=1))
-        size = os.path.getsize(tmp / "full" / "data.csv") / 1e9
-        print(f"\nWhole conversion of {args.rows:,} rows ({size:.2f} GB data.csv, generated in {t:.0f} s), "
-              f"defaults (L = 30), 2 threads:\n")
-        print("| output | wall s | peak RSS MB | file MB |")
-        print("|---|---:|---:|---:|")
-        for label, extra in (("uncompressed (default)", ()), ("--compress (shuffle+deflate 1)", ("--compress",))):
-            wall, peak, mb = run_convert(tmp / "full", tmp / "out.h5", *extra)
-            print(f"| {label} | {wall:.1f} | {peak:,.0f} | {mb:,.0f} |")
+        return convert_table(tmp, args, (("uncompressed (default)", ()),
+                                         ("--compress (shuffle+deflate 1)", ("--compress",))))
+
+
+def convert_table(tmp: Path, args, runs) -> int:
+    full = tmp / "full"
+    marker = full / f".rows-{args.rows}"  # a complete file of this size is already there
+    t = 0.0
+    if not marker.exists():
+        t, _ = timed(lambda: write_dataset(full, args.rows, seed=1))
+        marker.touch()
+    size = os.path.getsize(full / "data.csv") / 1e9
+    print(f"\nWhole conversion of {args.rows:,} rows ({size:.2f} GB data.csv, "
+          f"{f'generated in {t:.0f} s' if t else 'reused'}), defaults (L = 30), 2 threads, "
+          f"bsp_fast from {Path(bf.__file__).parent}, load {os.getloadavg()[0]:.2f}:\n")
+    # CPU s: user + system time of the child, all threads (less sensitive than the wall
+    # time to other work on the machine, though not immune: caches and memory are shared).
+    print("| output | wall s | CPU s | peak RSS MB | file MB | load before |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for label, extra in runs:
+        for _ in range(args.repeat):
+            load = os.getloadavg()[0]
+            wall, peak, mb, cpu = run_convert(full, tmp / "out.h5", *extra)
+            print(f"| {label} | {wall:.2f} | {cpu:.2f} | {peak:,.0f} | {mb:,.0f} | {load:.2f} |",
+                  flush=True)
     return 0
 
 

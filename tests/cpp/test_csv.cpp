@@ -126,6 +126,14 @@ TEST_CASE("the number fast path is bit-identical to fast_float::from_chars") {
     cases.emplace_back(buf, format_pyfloat(static_cast<double>(f), buf));
     cases.emplace_back(buf, format_pyfloat(uni(rng), buf));  // not float32-exact: must round
   }
+  // Decimals at and next to float rounding boundaries (midpoints between two floats, exact
+  // in a double): where the fast path's double division is not enough to decide.
+  for (int i = 0; i < 30000; ++i) {
+    const float f = static_cast<float>(uni(rng));
+    const double mid = (static_cast<double>(f) + std::nextafter(f, INFINITY)) / 2;
+    for (double d : {mid, std::nextafter(mid, 0.0), std::nextafter(mid, 1e9)})
+      cases.emplace_back(buf, format_pyfloat(d, buf));
+  }
   for (const std::string& c : cases) {
     const std::string text = c + ", 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]";
     const char* end = text.data() + text.size();

@@ -1,6 +1,8 @@
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <map>
 #include <random>
@@ -13,6 +15,7 @@
 #include "bsp/geometry/camera.hpp"
 #include "bsp/geometry/kinematics.hpp"
 #include "bsp/geometry/skeleton.hpp"
+#include "geometry/trig_simd.hpp"  // white-box: the bound rotation_matrices_f32 relies on
 
 using namespace bsp;
 
@@ -152,4 +155,64 @@ TEST_CASE("parents must form a tree in index order") {
   const std::int32_t bad[3] = {-1, 2, 0};
   CHECK_THROWS_AS(check_parents(bad, 3), std::invalid_argument);
   CHECK_NOTHROW(check_parents(skeleton::kParents.data(), 26));
+}
+
+TEST_CASE("vector sin/cos lie within 2^-44 (relative) of libm's: rotation_matrices_f32's bound") {
+  std::mt19937_64 rng(7);
+  for (double range : {2.0, 360.0, 1e4, 1e6}) {
+    std::uniform_real_distribution<double> u(-range, range);
+    std::vector<double> deg(40001), s(deg.size()), c(deg.size());  // odd: scalar tail too
+    for (std::size_t i = 0; i < deg.size(); ++i) {
+      const float a = static_cast<float>(u(rng));
+      const float k90 = static_cast<float>(90.0 * std::round(a / 90.0));  // sin or cos ~ 0
+      deg[i] = i % 4 == 0 ? k90 : i % 4 == 1 ? std::nextafter(k90, 2e6f) : a;
+    }
+    simd::sin_cos_deg_vector(deg.data(), s.data(), c.data(), deg.size());
+    double worst = 0;
+    std::size_t zeros = 0;  // libm's sin or cos exactly 0 for a non-zero angle: none
+    for (std::size_t i = 0; i < deg.size(); ++i) {
+      if (deg[i] == 0) continue;  // rotation_matrices_f32 sets sin(+-0) and cos(+-0) itself
+      const double a = deg[i] * (M_PI / 180.0), S = std::sin(a), C = std::cos(a);
+      zeros += S == 0 || C == 0;
+      worst = std::max({worst, std::fabs(s[i] - S) / std::fabs(S), std::fabs(c[i] - C) / std::fabs(C)});
+    }
+    CHECK(zeros == 0);
+    CHECK(worst <= 0x1p-44);
+  }
+}
+
+TEST_CASE("rotation_matrices_f32 equals the scalar rotation_from_pyr cast to float, bit for bit") {
+  std::mt19937_64 rng(11);
+  std::vector<float> t;  // (n, 6): location then angles
+  auto add = [&](float p, float y, float r) { t.insert(t.end(), {1.f, 2.f, 3.f, p, y, r}); };
+  const float inf = INFINITY, nan = NAN;
+  for (float a : {0.f, -0.f, 90.f, -90.f, 180.f, -180.f, 360.f, 45.f, 1e-30f, 1e6f, 1.5e6f,
+                  1e30f, inf, -inf, nan}) {
+    add(a, 0.f, 0.f), add(0.f, a, 0.f), add(0.f, 0.f, a), add(a, a, a), add(a, 33.f, -71.f);
+  }
+  for (double range : {1.0, 180.0, 360.0, 1e4, 1e6}) {
+    std::uniform_real_distribution<double> u(-range, range);
+    for (int i = 0; i < 60000; ++i)
+      add(static_cast<float>(u(rng)), static_cast<float>(u(rng)), static_cast<float>(u(rng)));
+  }
+  const std::size_t n = t.size() / 6;
+  std::vector<float> got(9 * n), want(9 * n);
+  rotation_matrices_f32(t.data(), 6, n, got.data());
+  for (std::size_t i = 0; i < n; ++i) {
+    const Mat3 R = rotation_from_pyr(t[6 * i + 3], t[6 * i + 4], t[6 * i + 5]);
+    for (int k = 0; k < 9; ++k) want[9 * i + static_cast<std::size_t>(k)] = static_cast<float>(R(k / 3, k % 3));
+  }
+  std::size_t differ = 0;
+  for (std::size_t k = 0; k < got.size(); ++k)
+    differ += std::memcmp(&got[k], &want[k], sizeof(float)) != 0;
+  CHECK(differ == 0);
+  // A stride other than 6, and n not a multiple of the vector chunk.
+  const std::vector<float> pyr = {0.f, 0.f, 0.f,  // angles at +3 of each stride-3 item
+                                  10.f, 20.f, 30.f, -5.f, 175.f, 89.f, 0.5f, -0.25f, 1000.f};
+  std::vector<float> m(27);
+  rotation_matrices_f32(pyr.data(), 3, 3, m.data());
+  for (std::size_t i = 0; i < 3; ++i) {
+    const Mat3 R = rotation_from_pyr(pyr[3 * i + 3], pyr[3 * i + 4], pyr[3 * i + 5]);
+    for (int k = 0; k < 9; ++k) CHECK(m[9 * i + static_cast<std::size_t>(k)] == static_cast<float>(R(k / 3, k % 3)));
+  }
 }

@@ -126,6 +126,51 @@ def test_deterministic_over_threads_and_seed(ds, tmp_path):
     assert any(not np.array_equal(a[k], c[k]) for k in a if k.endswith("frame_idx"))
 
 
+def test_batches_filled_while_written_give_the_same_values(ds, tmp_path, monkeypatch):
+    """With chunk_clips=1 the 22 clips are written in batches of 2 (2+ threads; each filled
+    while the previous one is written, pose_write.cpp) or of 4 (1 thread). Every value must
+    equal the one-batch, one-thread conversion's."""
+    ref = read_all(cv.convert(ds, tmp_path / "ref.h5", clip_length=10, threads=1,
+                              media=False)["output"])
+    core_convert = cv.api._core.convert_csv
+    monkeypatch.setattr(cv.api._core, "convert_csv",
+                        lambda csv, tmp, prog, **kw: core_convert(csv, tmp, prog, chunk_clips=1, **kw))
+    for threads in (1, 2, 3):
+        out = cv.convert(ds, tmp_path / f"t{threads}.h5", clip_length=10, threads=threads,
+                         media=False)["output"]
+        with h5py.File(out, "r") as f:
+            assert f["train/targets/world_pose_rot"].chunks[0] == 1  # the option took effect
+        d = read_all(out)
+        assert d.keys() == ref.keys()
+        for k in ref:
+            if k != "attrs":
+                np.testing.assert_array_equal(d[k], ref[k], err_msg=f"{k}, {threads} threads")
+
+
+def test_compressed_chunks_packed_on_worker_threads_read_back_the_same(ds, tmp_path, monkeypatch):
+    """--compress: the big fields' chunks are shuffled and deflated by the worker threads
+    and written as stored. chunk_clips=3 leaves a partial last chunk in every split. Read
+    through h5py (its own libhdf5), every value equals the uncompressed conversion's."""
+    ref = read_all(cv.convert(ds, tmp_path / "ref.h5", clip_length=10, threads=1,
+                              media=False)["output"])
+    core_convert = cv.api._core.convert_csv
+    monkeypatch.setattr(cv.api._core, "convert_csv",
+                        lambda csv, tmp, prog, **kw: core_convert(csv, tmp, prog, chunk_clips=3, **kw))
+    for threads in (1, 2):
+        out = cv.convert(ds, tmp_path / f"c{threads}.h5", clip_length=10, threads=threads,
+                         compress=True, media=False)["output"]
+        with h5py.File(out, "r") as f:
+            rot = f["train/targets/world_pose_rot"]
+            assert (rot.compression, rot.compression_opts, rot.shuffle) == ("gzip", 1, True)
+            assert rot.chunks[0] == 3 and rot.shape[0] % 3 != 0  # a partial last chunk
+            assert f["train/projection_2d"].compression is None  # small fields stay plain
+        d = read_all(out)
+        assert d.keys() == ref.keys()
+        for k in ref:
+            if k != "attrs":
+                np.testing.assert_array_equal(d[k], ref[k], err_msg=f"{k}, {threads} threads")
+
+
 def test_crossing_column_names_reordered_columns_and_crlf(tmp_path):
     rows = recording(U1, range(40), crossing_from=25)
     base = write_dataset(tmp_path / "base", rows)

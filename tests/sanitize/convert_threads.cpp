@@ -57,6 +57,19 @@ int main(int argc, char** argv) {
       return fail("two runs of the same conversion disagree");
   }
 
+  // One clip per HDF5 chunk and --compress: the pose arrays are written in many batches,
+  // each filled and its chunks packed by the workers while the previous one is written.
+  {
+    bsp::ConvertOptions o = options(dataset, threads);
+    o.chunk_clips = 1;
+    o.compress = true;
+    bsp::ConvertProgress progress;
+    const bsp::ConvertReport r = bsp::convert_csv(csv, out + "/packed.h5", o, &progress);
+    if (r.clips != first.clips) return fail("the packed conversion planned other clips");
+    std::printf("packed run: %zu clips in one-clip compressed chunks\n",
+                r.clips[0] + r.clips[1] + r.clips[2]);
+  }
+
   // Cancelled runs: another thread sets `cancel` once the conversion reaches `stage`
   // (read, check_media, media, ...); convert_csv must join its workers and
   // throw "conversion cancelled" (or finish, when the stage came and went too fast).

@@ -1,8 +1,12 @@
 // Writing one split of clips: per-clip arrays are filled in parallel into a batch buffer,
 // then written by the one thread that owns the HDF5 file (libhdf5 is not thread-safe).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
+#include <exception>
+#include <thread>
+#include <utility>
 
 #include "bsp/common/parallel.hpp"
 #include "bsp/geometry/kinematics.hpp"
@@ -45,16 +49,12 @@ const std::vector<Field>& frame_fields() {
   return f;
 }
 
-// Six-number transforms -> location (3) and CARLA rotation matrix (9), float32.
-void split_transform(const float* t6, float* loc, float* rot) {
-  loc[0] = t6[0], loc[1] = t6[1], loc[2] = t6[2];
-  const Mat3 R = rotation_from_pyr(t6[3], t6[4], t6[5]);
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) rot[3 * r + c] = static_cast<float>(R(r, c));
-}
-
-void split_pose(const float* pose, float* loc, float* rot) {
-  for (int j = 0; j < J; ++j) split_transform(pose + 6 * j, loc + 3 * j, rot + 9 * j);
+// n six-number transforms -> locations (3 each) and CARLA rotation matrices (9 each),
+// float32 (the matrices bitwise those of rotation_from_pyr, vector sin/cos).
+void split_transforms(const float* t6, std::size_t n, float* loc, float* rot) {
+  for (std::size_t j = 0; j < n; ++j)
+    loc[3 * j] = t6[6 * j], loc[3 * j + 1] = t6[6 * j + 1], loc[3 * j + 2] = t6[6 * j + 2];
+  rotation_matrices_f32(t6, 6, n, rot);
 }
 
 // Fills frame f of one clip into the per-field buffers at frame slot `s`.
@@ -62,10 +62,10 @@ void fill_frame(const PoseTable& t, std::size_t row, std::vector<std::vector<std
                 std::size_t s) {
   auto F = [&](int i) { return reinterpret_cast<float*>(buf[i].data()) + s * frame_fields()[i].per_frame(); };
   std::memcpy(F(0), &t.pose_camera[row * J * 2], sizeof(float) * J * 2);
-  split_pose(&t.pose_relative[row * J * 6], F(1), F(2));
-  split_pose(&t.pose_component[row * J * 6], F(3), F(4));
-  split_pose(&t.pose_world[row * J * 6], F(5), F(6));
-  split_transform(&t.walker_transform[row * 6], F(7), F(8));
+  split_transforms(&t.pose_relative[row * J * 6], J, F(1), F(2));
+  split_transforms(&t.pose_component[row * J * 6], J, F(3), F(4));
+  split_transforms(&t.pose_world[row * J * 6], J, F(5), F(6));
+  split_transforms(&t.walker_transform[row * 6], 1, F(7), F(8));
   std::memcpy(F(9), &t.velocity[row * 3], sizeof(float) * 3);
   float* bb = F(10);
   const float* uv = &t.pose_camera[row * J * 2];
@@ -78,6 +78,72 @@ void fill_frame(const PoseTable& t, std::size_t row, std::vector<std::vector<std
   bb[0] = lo_u, bb[1] = lo_v, bb[2] = hi_u, bb[3] = hi_v;
   buf[11][s] = t.is_crossing[row];
   reinterpret_cast<std::int64_t*>(buf[12].data())[s] = t.frame_idx[row];
+}
+
+using Buffers = std::vector<std::vector<std::uint8_t>>;  // one byte buffer per field
+
+// One task on its own thread; join() rethrows its exception. The destructor joins too (an
+// exception of the calling thread must not leave the task running on freed buffers).
+class Background {
+ public:
+  Background() = default;
+  Background(const Background&) = delete;
+  Background& operator=(const Background&) = delete;
+  ~Background() {
+    if (thread_.joinable()) thread_.join();
+  }
+  template <class Fn>
+  void run(Fn fn) {
+    thread_ = std::thread([this, fn] {
+      try {
+        fn();
+      } catch (...) {
+        error_ = std::current_exception();
+      }
+    });
+  }
+  void join() {
+    if (thread_.joinable()) thread_.join();
+    if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
+  }
+
+ private:
+  std::thread thread_;
+  std::exception_ptr error_;
+};
+
+// One batch of clips: per field, the filled bytes and (compressed fields) the packed chunks.
+struct Batch {
+  Buffers raw;
+  std::vector<std::vector<std::vector<std::uint8_t>>> packed;  // [field][chunk]
+};
+
+// Packs the chunks of the big fields of the first nb clips of `b` (the last one padded with
+// zeros to a whole chunk, as libhdf5 stores edge chunks), in parallel.
+void pack_chunks(const std::vector<Field>& fields, std::size_t nb, std::size_t rows_per_chunk,
+                 std::size_t L, int level, int threads, Batch& b) {
+  const std::size_t chunks = (nb + rows_per_chunk - 1) / rows_per_chunk;
+  std::vector<std::pair<std::size_t, std::size_t>> jobs;  // (field, chunk)
+  for (std::size_t i = 0; i < fields.size(); ++i) {
+    b.packed[i].resize(fields[i].big ? chunks : 0);
+    for (std::size_t j = 0; fields[i].big && j < chunks; ++j) jobs.emplace_back(i, j);
+  }
+  parallel_for(jobs.size(), 1, [&](std::size_t lo, std::size_t hi) {
+    h5::ChunkPacker packer(level);
+    std::vector<std::uint8_t> padded;
+    for (std::size_t q = lo; q < hi; ++q) {
+      const auto [i, j] = jobs[q];
+      const std::size_t clip_bytes = L * fields[i].per_frame() * fields[i].elem();
+      const std::size_t rows = std::min(rows_per_chunk, nb - j * rows_per_chunk);
+      const std::uint8_t* data = b.raw[i].data() + j * rows_per_chunk * clip_bytes;
+      if (rows < rows_per_chunk) {
+        padded.assign(rows_per_chunk * clip_bytes, 0);
+        std::copy_n(data, rows * clip_bytes, padded.data());
+        data = padded.data();
+      }
+      packer.pack(data, rows_per_chunk * clip_bytes, fields[i].elem(), b.packed[i][j]);
+    }
+  }, threads);
 }
 
 std::string str_at(const StringColumn& c, std::size_t row) {
@@ -107,22 +173,55 @@ void write_split(const h5::Group& g, const PoseTable& t, const Plan& plan,
                                   f.big && opt.compress ? packed : none));
     shapes.push_back(shape);
   }
-  const std::size_t batch = static_cast<std::size_t>(std::max(opt.chunk_clips, 1)) * 4;
-  std::vector<std::vector<std::uint8_t>> buf(fields.size());
-  for (std::size_t i = 0; i < fields.size(); ++i)
-    buf[i].resize(batch * static_cast<std::size_t>(L) * fields[i].per_frame() * fields[i].elem());
-  for (std::size_t c0 = 0; c0 < N; c0 += batch) {
-    check_cancel(progress);
+  // Two sets of batch buffers: with 2+ threads, batch k+1 is filled (in parallel) while
+  // this thread hands batch k to libhdf5, whose copies into the page cache are a large
+  // part of the conversion. The same values are written in the same order either way.
+  // Batches of 2 chunks then (4 otherwise): the buffers take the same memory.
+  const std::size_t chunk = static_cast<std::size_t>(std::max(opt.chunk_clips, 1));
+  const bool overlap = (opt.threads > 0 ? opt.threads : num_threads()) > 1 && N > 2 * chunk;
+  const std::size_t batch = chunk * (overlap ? 2 : 4);
+  // With compression, the big fields' chunks are packed (shuffle + deflate) by the worker
+  // threads too, and written as stored (write_chunk): libhdf5's filters would run on this
+  // one thread. The dataset's chunks hold min(chunk, N) clips; batches start on a chunk.
+  const std::size_t rows_per_chunk = std::min<std::size_t>(chunk, N);
+  std::array<Batch, 2> bufs;
+  for (int k = 0; k < (overlap ? 2 : 1); ++k) {
+    bufs[k].raw.resize(fields.size());
+    bufs[k].packed.resize(fields.size());
+    for (std::size_t i = 0; i < fields.size(); ++i)
+      bufs[k].raw[i].resize(batch * static_cast<std::size_t>(L) * fields[i].per_frame() * fields[i].elem());
+  }
+  const auto fill = [&](std::size_t c0, Batch& buf) {
     const std::size_t nb = std::min<std::size_t>(batch, N - c0);
     parallel_for(nb * static_cast<std::size_t>(L), 256, [&](std::size_t lo, std::size_t hi) {
       for (std::size_t s = lo; s < hi; ++s) {
         const Clip& c = clips[c0 + s / static_cast<std::size_t>(L)];
         const std::size_t row = plan.recordings[c.recording].rows[c.first + s % static_cast<std::size_t>(L)];
-        fill_frame(t, row, buf, s);
+        fill_frame(t, row, buf.raw, s);
       }
     }, opt.threads);
-    for (std::size_t i = 0; i < fields.size(); ++i)
-      g.write_rows(ds[i], fields[i].name, fields[i].type, shapes[i], c0, nb, buf[i].data());
+    if (opt.compress) pack_chunks(fields, nb, rows_per_chunk, static_cast<std::size_t>(L),
+                                  opt.compression_level, opt.threads, buf);
+  };
+  if (N > 0) fill(0, bufs[0]);
+  for (std::size_t c0 = 0, k = 0; c0 < N; c0 += batch, k = overlap ? 1 - k : 0) {
+    check_cancel(progress);
+    const std::size_t nb = std::min<std::size_t>(batch, N - c0), next = c0 + batch;
+    Background filling;  // joined before the next batch, and on any exception
+    if (overlap && next < N) filling.run([&, next, k] { fill(next, bufs[1 - k]); });
+    for (std::size_t i = 0; i < fields.size(); ++i) {
+      if (!(fields[i].big && opt.compress)) {
+        g.write_rows(ds[i], fields[i].name, fields[i].type, shapes[i], c0, nb, bufs[k].raw[i].data());
+        continue;
+      }
+      std::vector<hsize_t> offset(shapes[i].size(), 0);
+      for (std::size_t j = 0; j < bufs[k].packed[i].size(); ++j) {
+        offset[0] = c0 + j * rows_per_chunk;
+        g.write_chunk(ds[i], fields[i].name, offset, bufs[k].packed[i][j]);
+      }
+    }
+    filling.join();
+    if (next < N && !overlap) fill(next, bufs[0]);
     if (progress) progress->done += nb;
   }
   write_clip_meta(g, t, plan, clips, L);

@@ -108,15 +108,11 @@ inline const char* skip_spaces(const char* p, const char* end) {
 // ------------------------------------------------------------------------ numbers
 // Python's repr of a float is almost always "-?d+.d+" with at most 17 significant digits.
 // That shape is scanned 8 bytes at a time (branches depend on digit counts, not on every
-// digit), then fast_float's own Eisel-Lemire step (compute_float, to_float) rounds the
-// decimal to float32, so the result is bit-identical to fast_float::from_chars, which
-// handles everything else: exponents, nan/inf, >19 digits, the last bytes of a line.
-// Those three functions are fast_float internals (no API promise): CMakeLists.txt sets
-// BSP_FAST_FLOAT_INTERNALS only for the fast_float versions this was tested with; with any
-// other, every number goes through the documented from_chars (same values, ~20 % slower).
-#ifndef BSP_FAST_FLOAT_INTERNALS
-#define BSP_FAST_FLOAT_INTERNALS 0
-#endif
+// digit) into an integer w and a count kf of fraction digits, and rounded to float32
+// through one double division (below), bit-identical to fast_float::from_chars, which
+// handles everything else: exponents, nan/inf, >19 digits, the last bytes of a line, and
+// the rare decimal that lies too close to a float rounding boundary. Only fast_float's
+// documented from_chars is used.
 [[gnu::noinline, gnu::cold]] inline bool parse_float_generic(const char*& p, const char* end,
                                                             float& out) {
   const auto r = fast_float::from_chars(p, end, out);
@@ -125,7 +121,8 @@ inline const char* skip_spaces(const char* p, const char* end) {
   return true;
 }
 
-#if BSP_FAST_FLOAT_INTERNALS
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+#define BSP_CSV_NUMBER_FAST_PATH 1
 inline std::uint64_t load8(const char* p) {
   std::uint64_t v;
   std::memcpy(&v, p, 8);
@@ -139,15 +136,28 @@ inline unsigned digit_run(std::uint64_t v) {
   return z ? static_cast<unsigned>(__builtin_ctzll(z)) >> 3 : 8u;
 }
 
+// Value of 8 ASCII digits, little-endian (the SWAR step of simdjson and fast_float).
+inline std::uint32_t eight_digits(std::uint64_t v) {
+  v -= 0x3030303030303030ull;
+  v = v * 10 + (v >> 8);
+  v = ((v & 0x000000FF000000FFull) * 0x000F424000000064ull +
+       ((v >> 16) & 0x000000FF000000FFull) * 0x0000271000000001ull) >> 32;
+  return static_cast<std::uint32_t>(v);
+}
+
 // Value of the first k (1..8) digits of v: shift them to the top, pad with '0's.
 inline std::uint64_t digits_value(std::uint64_t v, unsigned k) {
   const unsigned shift = (8 - k) * 8;
   if (shift) v = (v << shift) | (0x3030303030303030ull >> (64 - shift));
-  return fast_float::parse_eight_digits_unrolled(v);
+  return eight_digits(v);
 }
 
 inline constexpr std::uint64_t kPow10[9] = {1, 10, 100, 1000, 10000, 100000, 1000000,
                                             10000000, 100000000};
+// 10^0 .. 10^19, each exact in a double (every power up to 10^22 is).
+inline constexpr double kPow10Exact[20] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,
+                                           1e7,  1e8,  1e9,  1e10, 1e11, 1e12, 1e13,
+                                           1e14, 1e15, 1e16, 1e17, 1e18, 1e19};
 
 // Appends the fraction digits at f (up to 3 chunks of 8) to w; returns how many there were,
 // or 0 when the fast path cannot take them (no digit, or more than 19 digits in all).
@@ -161,32 +171,35 @@ inline unsigned append_fraction(const char* f, unsigned int_digits, std::uint64_
       if (k) w = w * kPow10[k] + digits_value(v, k);
       return total + k;
     }
-    w = w * 100000000ull + fast_float::parse_eight_digits_unrolled(v);
+    w = w * 100000000ull + eight_digits(v);
     total += 8;
   }
   return 0;
 }
-
-#endif  // BSP_FAST_FLOAT_INTERNALS
+#else
+#define BSP_CSV_NUMBER_FAST_PATH 0
+#endif
 
 [[gnu::always_inline]] inline bool parse_float(const char*& p, const char* end, float& out) {
-#if BSP_FAST_FLOAT_INTERNALS && defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+#if BSP_CSV_NUMBER_FAST_PATH
   if (end - p < 48) return parse_float_generic(p, end, out);  // loads read < 48 bytes ahead
   const char* s = p + (*p == '-');
   const std::uint64_t head = load8(s);
   const unsigned ki = digit_run(head);  // integer digits
   if (ki == 0 || ki == 8 || s[ki] != '.') return parse_float_generic(p, end, out);
   std::uint64_t w = digits_value(head, ki);
-  const unsigned kf = append_fraction(s + ki + 1, ki, w);
+  const unsigned kf = append_fraction(s + ki + 1, ki, w);  // 1..18
   const char* stop = s + ki + 1 + kf;
   if (kf == 0 || *stop == 'e' || *stop == 'E') return parse_float_generic(p, end, out);
-  float v = 0;
-  if (w != 0) {
-    const auto am =
-        fast_float::compute_float<fast_float::binary_format<float>>(-static_cast<std::int64_t>(kf), w);
-    if (am.power2 < 0) return parse_float_generic(p, end, out);  // needs the slow path
-    fast_float::to_float(false, am, v);
-  }
+  // x = w / 10^kf. w < 10^19 < 2^64 and 10^kf is exact, so d lies within a relative 2^-52
+  // of x (two correctly rounded steps). If d * (1 - 2^-50) and d * (1 + 2^-50), which
+  // bracket x even after their own rounding, round to the same float, x rounds to it too
+  // (rounding is monotone): the correctly rounded float, as from_chars gives. Otherwise x
+  // lies within ~2^-50 of a float rounding boundary (~3 decimals in 10^8): from_chars.
+  // 1e-19 <= x < 1e18 (or 0): no subnormal float, no overflow.
+  const double d = static_cast<double>(w) / kPow10Exact[kf];
+  const float v = static_cast<float>(d * (1 + 0x1p-50));
+  if (static_cast<float>(d * (1 - 0x1p-50)) != v) return parse_float_generic(p, end, out);
   out = *p == '-' ? -v : v;
   p = stop;
   return true;

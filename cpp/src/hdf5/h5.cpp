@@ -123,6 +123,13 @@ void Group::write_rows(const Handle& ds, const std::string& name, Type type,
                "cannot write " + where(name));
 }
 
+void Group::write_chunk(const Handle& ds, const std::string& name,
+                        const std::vector<hsize_t>& offset,
+                        const std::vector<std::uint8_t>& packed) const {
+  check_status(H5Dwrite_chunk(ds.id(), H5P_DEFAULT, 0, offset.data(), packed.size(), packed.data()),
+               "cannot write a chunk of " + where(name));
+}
+
 void Group::write_strings(const std::string& name, const std::vector<std::string>& values) const {
   std::vector<const char*> ptrs(values.size());
   for (std::size_t i = 0; i < values.size(); ++i) ptrs[i] = values[i].c_str();

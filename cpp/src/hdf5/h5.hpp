@@ -12,6 +12,8 @@
 
 #include "bsp/common/errors.hpp"
 
+struct libdeflate_compressor;  // <libdeflate.h>
+
 namespace bsp::h5 {
 
 // Owns one hid_t and closes it with the right H5*close function.
@@ -45,6 +47,25 @@ struct Compression {
   int level = 1;
 };
 
+// One chunk of a dataset created with Compression{true, level}, packed as libhdf5's filter
+// pipeline stores it: bytes shuffled by element size (H5Z shuffle), then deflated in zlib's
+// format (libdeflate at the same level: the bytes differ from zlib's, the data read back
+// do not). No libhdf5 call and no shared state: chunks are packed on worker threads, in
+// parallel, and written by Group::write_chunk on the thread that owns the file.
+class ChunkPacker {
+ public:
+  explicit ChunkPacker(int level);
+  ~ChunkPacker();
+  ChunkPacker(const ChunkPacker&) = delete;
+  ChunkPacker& operator=(const ChunkPacker&) = delete;
+  // `bytes` of elements of `elem` bytes -> out (resized to the packed size).
+  void pack(const void* data, std::size_t bytes, std::size_t elem, std::vector<std::uint8_t>& out);
+
+ private:
+  ::libdeflate_compressor* compressor_;
+  std::vector<std::uint8_t> shuffled_;
+};
+
 // A typed element for datasets and attributes.
 enum class Type { F32, F64, I32, I64, U8, Bool, Str };
 
@@ -62,6 +83,11 @@ class Group {
   void write_rows(const Handle& ds, const std::string& name, Type type,
                   const std::vector<hsize_t>& shape, hsize_t row0, hsize_t rows,
                   const void* data) const;
+  // Writes one whole chunk as stored, i.e. packed by ChunkPacker for a dataset created with
+  // Compression{true, level} (H5Dwrite_chunk, all filters applied); `offset` is the chunk's
+  // first element in each dimension.
+  void write_chunk(const Handle& ds, const std::string& name, const std::vector<hsize_t>& offset,
+                   const std::vector<std::uint8_t>& packed) const;
   // Variable-length UTF-8 string dataset (N,), written at once.
   void write_strings(const std::string& name, const std::vector<std::string>& values) const;
 
