@@ -163,7 +163,7 @@ def test_pose_estimation_table_refuses_a_file_of_another_policy(sample, default_
     with pytest.warns(UserWarning):
         cv.convert(sample, union, threads=2, crop_box="mask+joints")
     out = tmp_path / "runs"
-    with pytest.raises(ValueError, match="converted with --crop-box mask\+joints, but table "
+    with pytest.raises(ValueError, match=r"converted with --crop-box mask\+joints, but table "
                        "'pose_estimation' row 'pose_cnn' needs --crop-box mask"):
         reproduce("pose_estimation", union, "smoke", out, rows=["pose_cnn"], dry_run=True,
                   log=lambda *a: None)
@@ -171,6 +171,6 @@ def test_pose_estimation_table_refuses_a_file_of_another_policy(sample, default_
               dry_run=True, log=lambda *a: None)
     reproduce("pose_estimation", default_file["output"], "smoke", out, rows=["pose_cnn"],
               dry_run=True, log=lambda *a: None)
-    with pytest.raises(ValueError, match="needs --crop-box mask\+joints"):
+    with pytest.raises(ValueError, match=r"needs --crop-box mask\+joints"):
         reproduce("pose_estimation", default_file["output"], "smoke", out,
                   rows=["pose_cnn_mask_joints"], dry_run=True, log=lambda *a: None)
