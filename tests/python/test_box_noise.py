@@ -125,3 +125,25 @@ def test_bsp_eval_box_noise_scores_noisy_crops(converted, tmp_path):
     assert zero.metrics == plain.metrics
     with pytest.raises(SystemExit):
         eval_main([str(run.run_dir), "--box-noise", "0.1"])
+
+
+def test_seeds_pose_table_scores_noisy_boxes_per_seed(converted, tmp_path, capsys):
+    # bsp-reproduce --seeds: every seed's run is scored on noisy boxes too, as without
+    import json
+    from pathlib import Path
+
+    from bsp_fast.training import reproduce as R
+
+    argv = ["pose_estimation", "--data", str(converted), "--budget", "smoke", "--out",
+            str(tmp_path), "--rows", "pose_cnn", "--seeds", "2", "--jobs", "1", "--set",
+            f"crop_size={S}", "--set", "hp={width: 4, hidden: 16}"]
+    assert R.main(argv) == 0
+    text = capsys.readouterr().out
+    saved = json.loads((tmp_path / "pose_estimation-smoke" / "results.json").read_text())
+    seeds = saved["results"]["pose_cnn"]["seeds"]
+    assert len(seeds) == 2
+    for one in seeds.values():
+        noisy = json.loads((Path(one["run"]) / "test_box_noise.json").read_text())
+        assert noisy["box_noise"] == {"scale": 0.1, "shift": 0.05}
+        assert one["metrics"]["pck_0.05_noisy"] == noisy["test"]["pck_0.05"]
+    assert "PCK@0.05 noisy boxes" in text

@@ -381,3 +381,4 @@ def test_cell_interval_is_that_of_the_mean_over_seeds(tmp_path):
                      ["den"])) for s in seeds.values())
     assert r["metrics"][m] == pytest.approx(mean)
     assert low < mean < high and not low < pooled < high  # pooled is near 0.23, mean 0.5
+

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from . import config as C
 from ..atomic import write_text
+from .noisy_boxes import noisy_box_metrics
 from .runs import RunError, read_run, resumable
 from .figures import draw_figures
 from .findings import NA, NO, YES, evaluate_findings, format_value
@@ -84,7 +85,7 @@ def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrid
         run = read_run(run_dir)
         m = run["metrics"]
         test = dict(m.get("test", {}))
-        test.update(_noisy_box_metrics(tab, run_dir, force, quiet, log))
+        test.update(noisy_box_metrics(tab, run_dir, force, quiet, log))
         results[row["name"]] = {"metrics": test, "initial": (m.get("initial") or {}).get("test", {}),
                                 "baseline": (m.get("initial") or {}).get("baseline"),
                                 "epochs": m.get("epochs"), "best_epoch": m.get("best_epoch"),
@@ -99,33 +100,6 @@ def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrid
                                     "seconds": {}, "run": r["run"] + " (initial metrics)",
                                     "noise": r["noise"], "mjp": r["mjp"]}
     return {"table": tab["table"], "budget": budget, "dir": str(base), "results": results}
-
-
-def _noisy_box_metrics(tab: dict, run_dir: Path, force: bool, quiet: bool, log) -> dict:
-    """A table with ``box_noise: {scale, shift}`` (pose estimation) also scores each trained
-    row's best checkpoint on the test crops of noisy boxes (``bsp-eval --box-noise``);
-    the metrics come back with the suffix ``_noisy`` and are kept in
-    ``RUN/test_box_noise.json``."""
-    spec = tab.get("box_noise")
-    if not spec:
-        return {}
-    path = run_dir / "test_box_noise.json"
-    if path.is_file() and not force:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    else:
-        from .evaluate import evaluate
-
-        noise = (float(spec["scale"]), float(spec["shift"]))
-        log(f"[{run_dir.name}] scoring the test split with noisy boxes (scale ±{noise[0]:g}, "
-            f"shift ±{noise[1]:g} of the side)")
-        try:
-            res = evaluate(run_dir, "test", box_noise=noise, quiet=quiet)
-        except (ValueError, RunError) as exc:
-            log(f"[{run_dir.name}] no noisy-box scores: {exc}")
-            return {}
-        doc = {"box_noise": {"scale": noise[0], "shift": noise[1]}, "test": res.metrics}
-        write_text(path, json.dumps(doc, indent=1))
-    return {f"{k}_noisy": v for k, v in doc["test"].items() if k != "loss"}
 
 
 # ---------------------------------------------------------------------- output

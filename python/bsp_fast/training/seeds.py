@@ -20,6 +20,7 @@ from ..defaults import SEED
 from .breakdown import FILE as BREAKDOWN
 from .table_files import (BUDGETS, RULE_KEYS, check_budget_rule, load_table, prepare_row_data,
                           row_options, wanted_rows)
+from .noisy_boxes import noisy_box_metrics
 from .runs import RunError, read_run, resumable
 
 __all__ = ["RULE_KEYS", "check_budget_rule", "seed_list", "reproduce_seeds", "add_options",
@@ -207,6 +208,8 @@ def reproduce_seeds(table, data, budget: str = "quick", out="runs", *, seeds: in
     for row, seed, run_dir, _ in plan:
         r = results.setdefault(row["name"], {"seeds": {}, "source": "test"})
         r["seeds"][str(seed)] = one = _seed_result(run_dir)
+        if not row.get("initial_of"):  # pose estimation: the same run on noisy boxes
+            one["metrics"].update(noisy_box_metrics(tab, run_dir, force, quiet, log))
         r["noise"], r["mjp"] = one["noise"], one["mjp"]
     for row in tab["rows"]:  # rows read from another row's trivial baseline
         src = row.get("initial_of")
