@@ -63,3 +63,28 @@ def test_loc_3d_normalised_and_plain():
 def test_bad_input(call, expected):
     with pytest.raises(ValueError, match=expected):
         call()
+
+
+def test_pose_loss_gives_finite_gradients_over_frames_without_a_crop():
+    # a frame with no pedestrian pixel has no crop and NaN targets (crop_box "mask");
+    # masked by `visible`, it must reach neither the loss nor the gradient
+    import torch
+
+    from bsp_fast.models.base import masked_mse
+
+    pred = torch.zeros(1, 2, 26, 2, requires_grad=True)
+    target = torch.ones(1, 2, 26, 2)
+    target[0, 1] = float("nan")  # frame 1: no crop
+    visible = torch.ones(1, 2, 26, dtype=torch.bool)
+    visible[0, 1] = False
+    loss = masked_mse(pred, target, visible)
+    loss.backward()
+    assert float(loss) == 1.0  # (1^2 + 1^2) / 2 per coordinate on the kept joints
+    assert torch.isfinite(pred.grad).all()
+    assert torch.all(pred.grad[0, 1] == 0) and torch.all(pred.grad[0, 0] != 0)
+    # a "visible" joint whose target is NaN all the same is left out too
+    visible[0, 1, 3] = True
+    pred.grad = None
+    loss = masked_mse(pred, target, visible)
+    loss.backward()
+    assert float(loss) == 1.0 and torch.isfinite(pred.grad).all()

@@ -246,9 +246,13 @@ def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask=None) -> torch.Ten
     """Mean squared error over the coordinates of the joints where ``mask (..., J)``;
     masked-out joints reach neither the value nor the gradient, even when NaN (a frame
     without a crop has NaN targets)."""
-    err = (pred - target).pow(2).sum(-1)
     if mask is None:
-        return err.mean() / pred.shape[-1]
-    keep = mask.bool()
+        return (pred - target).pow(2).sum(-1).mean() / pred.shape[-1]
+    # a joint is kept only where its target is finite too; masked targets are replaced
+    # before the subtraction: torch.where after it would keep the value finite but give
+    # NaN gradients (0 x NaN in pow's backward), and one such batch ruins the weights
+    keep = mask.bool() & torch.isfinite(target).all(-1)
+    safe = torch.where(keep[..., None], target, pred.detach())
+    err = (pred - safe).pow(2).sum(-1)
     err = torch.where(keep, err, torch.zeros((), dtype=err.dtype, device=err.device))
     return err.sum() / (keep.sum() * pred.shape[-1]).clamp_min(1)
