@@ -26,13 +26,7 @@ ROOT = Path(__file__).resolve().parents[2]
 ABLATIONS = ("ablation_classifier", "ablation_relative_rot", "ablation_poseformer")
 PNG = b"\x89PNG\r\n\x1a\n"
 
-
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

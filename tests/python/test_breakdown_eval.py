@@ -19,7 +19,8 @@ from bsp_fast.training.eval_breakdown import (DISTANCE_EDGES_M, FILE, HEIGHT_EDG
 from bsp_fast.training.evaluate import breakdown
 from bsp_fast.training.evaluate import main as eval_main
 
-pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
+pytestmark = [pytest.mark.usefixtures("one_torch_thread"),
+              pytest.mark.filterwarnings("ignore::DeprecationWarning"),
               pytest.mark.filterwarnings("ignore::UserWarning")]
 
 TINY = {"classification": ("lstm", {"hidden_size": 8, "num_layers": 1}),
@@ -27,14 +28,6 @@ TINY = {"classification": ("lstm", {"hidden_size": 8, "num_layers": 1}),
         "lifting": ("baseline_3d", {"linear_size": 32, "num_blocks": 1}),
         "pose_estimation": ("pose_cnn", {"width": 4, "hidden": 16})}
 L, TEST_CLIPS = 8, 16
-
-
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 @pytest.fixture(scope="module")

@@ -26,13 +26,7 @@ from bsp_fast.training import seeds as S
 from bsp_fast.training.scoring import TaskMetrics
 from bsp_fast.training.train import resolve_precision
 
-
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

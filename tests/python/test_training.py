@@ -22,7 +22,8 @@ from bsp_fast.training.curves import read_logs
 from bsp_fast.training.evaluate import main as eval_main
 from bsp_fast.training.train import main as train_main
 
-pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
+pytestmark = [pytest.mark.usefixtures("one_torch_thread"),
+              pytest.mark.filterwarnings("ignore::DeprecationWarning"),
               pytest.mark.filterwarnings("ignore::UserWarning")]
 
 # tiny versions of a model of each task (seconds per run on one core)
@@ -39,14 +40,6 @@ KEYS = {"classification": {"loss", "f1", "precision", "recall", "accuracy",
                             "pck_0.05_occluded", "pck_0.05_aligned", "pckhn_0.1_aligned",
                             "fully_occluded_frames"} | {f"pck_0.05/{n}" for n in JOINT_NAMES}}
 REPO = Path(__file__).resolve().parents[2]
-
-
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 @pytest.fixture(scope="module")
