@@ -170,7 +170,8 @@ def _test_kill(step: str) -> None:
 
 
 def write_bytes(path, data: bytes, *, force: bool = True, mode: int = 0o644) -> None:
-    """Writes a small file whole (temporary name, then :func:`publish`)."""
+    """Writes a file whole from ``data`` (bytes or any buffer, e.g. a memoryview:
+    temporary name, then :func:`publish`)."""
     with atomic_output(path, force=force) as tmp:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
         with os.fdopen(fd, "wb") as fh:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -286,6 +287,20 @@ def normalise(values: dict, source: str = "options") -> dict:
     return out
 
 
+def parse_duration(text) -> float:
+    """``"10m"``, ``"90s"``, ``"1.5h"`` or a number of seconds -> seconds; ``0``/``off``:
+    no checkpoints within epochs. ValueError for anything else."""
+    s = str(text).strip().lower()
+    if s in ("0", "off", "none", "no", "false"):
+        return 0.0
+    m = re.fullmatch(r"(\d+(?:\.\d*)?)\s*(s|m|h|min)?", s)
+    if not m:
+        raise ValueError(f"checkpoint_every expects a duration such as 10m, 90s, 1h or 0 "
+                         f"(off), got {text!r}")
+    unit = {"s": 1, None: 1, "m": 60, "min": 60, "h": 3600}[m.group(2)]
+    return float(m.group(1)) * unit
+
+
 def validate(cfg: dict) -> dict:
     """Cross-option checks on a complete config (task, model and hyper-parameters against
     the task and model registries)."""
@@ -302,8 +317,6 @@ def validate(cfg: dict) -> dict:
         raise ConfigError("no data given (--data DATASET_DIR or clips.h5)")
     if cfg["label"] != "last" and not cfg["label"].startswith("any:"):
         raise ConfigError(f"label must be 'last' or 'any:F', got {cfg['label']!r}")
-    from .lifecycle import parse_duration
-
     try:
         parse_duration(cfg.get("checkpoint_every", 0))
     except ValueError as exc:

@@ -113,15 +113,25 @@ def plot_curves(run_dir, task: str, out_path=None, initial: dict | None = None,
     logs = read_logs(run_dir)
     if not any(k.startswith(("train/", "val/")) for k in logs):
         return None
+    fig = curves_figure(logs, task, initial, title, best_epoch)
+    out = Path(out_path) if out_path is not None else Path(run_dir) / "curves.png"
+    return save_figure(fig, out)
+
+
+def save_figure(fig, out) -> Path:
+    """Writes a matplotlib figure as PNG ``out`` (temporary name, then renamed; an existing
+    file is replaced) and closes it, whatever happens."""
     import matplotlib.pyplot as plt
 
     from ..atomic import atomic_output
 
-    fig = curves_figure(logs, task, initial, title, best_epoch)
-    out = Path(out_path) if out_path is not None else Path(run_dir) / "curves.png"
-    with atomic_output(out, force=True) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        with atomic_output(out, force=True) as tmp:
+            fig.savefig(tmp, dpi=100, format="png")
+    finally:
+        plt.close(fig)
     return out
 
 

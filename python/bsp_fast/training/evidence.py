@@ -44,39 +44,43 @@ class _Sums:
             self.docs[path] = json.loads(Path(path).read_text(encoding="utf-8"))
         return self.docs[path]
 
-    def pooled(self, row: str, metric: str, initial: bool = False):
-        """``(recordings, num, den, empty)`` of ``row`` over its seeds (``initial``: its
-        trivial baseline's), or None when a run has no per-recording file."""
+    def _parts(self, row: str, metric: str, initial: bool):
+        """``(sections, empty)``: the ``test`` (or ``initial``) section of each seed's
+        per-recording file and the metric's value for no data; None when a seed has no
+        file or its section lacks ``metric``."""
         r = self.res["results"][row]
         section = "initial" if (initial or r.get("source") == "initial") else "test"
-        docs = []
-        for s in r["seeds"].values():
-            if not s.get("per_recording"):
-                return None
-            docs.append(self._doc(s["per_recording"]))
-        parts = [d[section] for d in docs if d.get(section)]
-        if len(parts) != len(docs) or any(metric not in p["metrics"] for p in parts):
-            return None
-        empty = docs[0].get("empty", {}).get(metric)
-        return (*U.pool(parts, metric), float("nan") if empty is None else empty)
-
-    def per_seed(self, row: str, metric: str, initial: bool = False):
-        """``[(recordings, num, den, empty), ...]``, one per seed of ``row``, when every seed
-        was tested on the same recordings (the split fixed); else None (the caller pools)."""
-        r = self.res["results"][row]
-        section = "initial" if (initial or r.get("source") == "initial") else "test"
-        out = []
-        for s in r["seeds"].values():
+        parts, empty = [], None
+        for i, s in enumerate(r["seeds"].values()):
             if not s.get("per_recording"):
                 return None
             d = self._doc(s["per_recording"])
             part = d.get(section)
             if not part or metric not in part["metrics"]:
                 return None
-            empty = d.get("empty", {}).get(metric)
-            out.append((*U.pool([part], metric), float("nan") if empty is None else empty))
-        recordings = {tuple(o[0]) for o in out}
-        return out if len(recordings) == 1 else None
+            parts.append(part)
+            if i == 0:  # the first seed's file says it
+                empty = d.get("empty", {}).get(metric)
+        return parts, float("nan") if empty is None else empty
+
+    def pooled(self, row: str, metric: str, initial: bool = False):
+        """``(recordings, num, den, empty)`` of ``row`` over its seeds (``initial``: its
+        trivial baseline's), or None when a run has no per-recording file."""
+        found = self._parts(row, metric, initial)
+        if found is None:
+            return None
+        parts, empty = found
+        return (*U.pool(parts, metric), empty)
+
+    def per_seed(self, row: str, metric: str, initial: bool = False):
+        """``[(recordings, num, den, empty), ...]``, one per seed of ``row``, when every seed
+        was tested on the same recordings (the split fixed); else None (the caller pools)."""
+        found = self._parts(row, metric, initial)
+        if found is None:
+            return None
+        parts, empty = found
+        out = [(*U.pool([part], metric), empty) for part in parts]
+        return out if len({tuple(o[0]) for o in out}) == 1 else None
 
 
 def _seed_mean(counts: list, fn):

@@ -111,7 +111,7 @@ def draw_figures(tab: dict, res: dict, out_dir=None) -> list:
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
 
-    from ..atomic import publish, temp_path
+    from .curves import save_figure
 
     written = []
     n_seeds = len(res.get("seeds") or [1])
@@ -144,12 +144,5 @@ def draw_figures(tab: dict, res: dict, out_dir=None) -> list:
                color="grey")
         f.tight_layout()
         out = Path(out_dir if out_dir is not None else res["dir"]) / fig["file"]
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = temp_path(out, ".png")
-        try:
-            f.savefig(tmp, dpi=100)
-        finally:
-            plt.close(f)
-        publish(tmp, out, force=True)
-        written.append(out)
+        written.append(save_figure(f, out))
     return written

@@ -17,9 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import io
-import os
 import random
-import re
 import signal
 import time
 from pathlib import Path
@@ -30,10 +28,11 @@ from lightning.fabric.plugins.io.torch_io import TorchCheckpointIO
 from lightning.pytorch.callbacks import Callback
 
 from ..atomic import write_bytes
-from .runs import MARKER, read_marker, write_marker
+from .config import parse_duration  # re-exported: the option's parser
+from .runs import write_marker
 
-__all__ = ["Interrupted", "OutputWriteError", "CheckpointWriteError", "AtomicCheckpointIO", "Lifecycle",
-           "signals", "parse_duration", "MARKER", "write_marker", "read_marker"]
+__all__ = ["Interrupted", "OutputWriteError", "CheckpointWriteError", "AtomicCheckpointIO",
+           "Lifecycle", "signals", "parse_duration"]
 
 _EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}
 
@@ -57,20 +56,6 @@ class CheckpointWriteError(OutputWriteError):
     """A checkpoint could not be written; the previous one is intact."""
 
 
-def parse_duration(text) -> float:
-    """``"10m"``, ``"90s"``, ``"1.5h"`` or a number of seconds -> seconds; ``0``/``off``:
-    no checkpoints within epochs. ValueError for anything else."""
-    s = str(text).strip().lower()
-    if s in ("0", "off", "none", "no", "false"):
-        return 0.0
-    m = re.fullmatch(r"(\d+(?:\.\d*)?)\s*(s|m|h|min)?", s)
-    if not m:
-        raise ValueError(f"checkpoint_every expects a duration such as 10m, 90s, 1h or 0 "
-                         f"(off), got {text!r}")
-    unit = {"s": 1, None: 1, "m": 60, "min": 60, "h": 3600}[m.group(2)]
-    return float(m.group(1)) * unit
-
-
 class AtomicCheckpointIO(TorchCheckpointIO):
     """Lightning's checkpoint writer through bsp_fast's one temp-then-rename helper; a
     failed write leaves the previous file as it was and raises
@@ -84,7 +69,7 @@ class AtomicCheckpointIO(TorchCheckpointIO):
         path = Path(path)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            write_bytes(path, buffer.getbuffer().tobytes())
+            write_bytes(path, buffer.getbuffer())  # a view: no second copy of the checkpoint
         except OSError as exc:
             raise CheckpointWriteError(exc.errno, f"{path}: cannot save the checkpoint "
                                        f"({exc.strerror or exc}); the previous one is "
@@ -140,10 +125,10 @@ def signals():
 # ---------------------------------------------------------------------- the callback
 def _rng_state() -> dict:
     kind, keys, pos, has_gauss, gauss = np.random.get_state()
+    version, internal, gauss_next = random.getstate()
     return {"torch": torch.get_rng_state(), "numpy": [kind, keys.tolist(), pos, has_gauss,
                                                       gauss],
-            "python": [random.getstate()[0], list(random.getstate()[1]),
-                       random.getstate()[2]]}
+            "python": [version, list(internal), gauss_next]}
 
 
 def _set_rng_state(state: dict) -> None:

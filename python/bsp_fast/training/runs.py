@@ -21,7 +21,7 @@ from ..atomic import publish, temp_path, write_text
 
 __all__ = ["RunDirectory", "RunError", "default_run_dir", "resolve_checkpoint", "read_run",
            "ENV_TMP", "MARKER", "write_marker", "read_marker", "orphaned_runs",
-           "resume_hint", "resumable"]
+           "resume_hint", "resumable", "is_temporary"]
 
 #: Set by the process that created the temporary run directory, so DDP processes that
 #: Lightning starts later (they re-run the command) write into the same directory.
@@ -197,6 +197,13 @@ def _alive(pid) -> bool:
     except PermissionError:
         return True
     return True
+
+
+def is_temporary(path) -> bool:
+    """Whether ``path`` is a run's temporary directory (``.NAME.tmp-...``, see
+    :func:`bsp_fast.atomic.temp_path`), e.g. one a killed run left."""
+    name = Path(path).name
+    return name.startswith(".") and ".tmp-" in name
 
 
 def orphaned_runs(out) -> list:

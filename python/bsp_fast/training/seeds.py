@@ -15,9 +15,10 @@ import time
 from pathlib import Path
 
 from . import config as C
-from ..atomic import publish, temp_path, write_text
+from ..atomic import write_text
 from ..defaults import SEED
 from .breakdown import FILE as BREAKDOWN
+from .curves import save_figure
 from .table_files import (BUDGETS, RULE_KEYS, check_budget_rule, load_table, prepare_row_data,
                           row_options, wanted_rows)
 from .noisy_boxes import noisy_box_metrics
@@ -271,10 +272,4 @@ def learning_curves(tab: dict, res: dict, path=None):
     ax.set_title(f"{tab['table']} — budget {res['budget']}")
     fig.tight_layout()
     out = Path(path) if path is not None else Path(res["dir"]) / "curves.png"
-    tmp = temp_path(out, ".png")
-    try:
-        fig.savefig(tmp, dpi=100)
-    finally:
-        plt.close(fig)
-    publish(tmp, out, force=True)
-    return out
+    return save_figure(fig, out)

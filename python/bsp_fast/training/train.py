@@ -14,8 +14,9 @@ from pathlib import Path
 
 from . import config as C
 from ..atomic import remove
-from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, read_marker, \
-    read_run, refuse_unsafe_output, resolve_checkpoint, resume_hint, write_json, write_marker
+from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, is_temporary, \
+    read_marker, read_run, refuse_unsafe_output, resolve_checkpoint, resume_hint, write_json, \
+    write_marker
 from .precision import check_precision, native_bf16, resolve_precision
 from .setup import make_datamodule, make_trainer, prepare_data, rank as _rank
 from .tasks import TASKS, get_task
@@ -69,7 +70,7 @@ def resolve_config(cli: dict, config_path=None) -> tuple:
         if resolved.get("data") and known.get("data") and not Path(known["data"]).exists():
             known["data"] = resolved["data"]  # a relative path, resumed from elsewhere
         cfg.update(C.normalise(known, f"{target} (saved config)"))
-        orphan = run_dir is not None and ".tmp-" in run_dir.name and run_dir.name[0] == "."
+        orphan = run_dir is not None and is_temporary(run_dir)
         resume = {"ckpt": Path(ckpt), "run_dir": run_dir, "orphan": orphan}
         if orphan:  # a killed run: it goes to the --out it was started with
             cfg["out"] = (read_marker(run_dir) or {}).get("out") or resolved.get("out")
@@ -222,13 +223,6 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
     if resume is not None and resume.get("orphan"):
         remove(resume["run_dir"])  # continued and published under its own name
     return result
-
-
-def _stopped(exc, run) -> str:
-    """The one line saying where a stopped run is and how to continue it."""
-    if run is None or run.left_in is None:
-        return "nothing written"
-    return resume_hint(run.left_in)
 
 
 def _inputs(cfg: dict, resume, config_path=None) -> list:
@@ -391,18 +385,17 @@ def main(argv=None) -> int:
     except BaseException as exc:  # SIGINT/SIGTERM (Interrupted) or a full disk
         from .lifecycle import Interrupted, OutputWriteError
 
+        if not isinstance(exc, (Interrupted, OutputWriteError)):
+            raise
+        # where the stopped run was left (an incomplete run) and how to continue it
+        left = getattr(getattr(exc, "run", None), "left_in", None)
         if isinstance(exc, Interrupted):
-            print(f"bsp-train: interrupted ({exc}) at {_stopped(exc, getattr(exc, 'run', None))}"
-                  if getattr(getattr(exc, "run", None), "left_in", None) else
-                  f"bsp-train: interrupted ({exc}); nothing written", file=sys.stderr)
+            where = f" at {resume_hint(left)}" if left else "; nothing written"
+            print(f"bsp-train: interrupted ({exc}){where}", file=sys.stderr)
             return exc.code
-        if isinstance(exc, OutputWriteError):
-            run = getattr(exc, "run", None)
-            where = (f"; the run is left at {_stopped(exc, run)}"
-                     if getattr(run, "left_in", None) else "; nothing written")
-            print(f"bsp-train: {exc.strerror}{where}", file=sys.stderr)
-            return 1
-        raise
+        where = f"; the run is left at {resume_hint(left)}" if left else "; nothing written"
+        print(f"bsp-train: {exc.strerror}{where}", file=sys.stderr)
+        return 1
     if result is None:  # a DDP process started by Lightning
         return 0
     from .tables import runs_table  # printed with --quiet too: the result of the command
