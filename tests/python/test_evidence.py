@@ -291,8 +291,27 @@ def test_seeds_smoke_run_gives_per_seed_values_intervals_and_marks(data, tmp_pat
     assert first["status"] == U.mark(U.Interval(first["difference"], lo, hi, 0), 1)
     assert re.search(r"\| perfect data: LSTM >= PedestrianGraph \| lstm-perfect − "
                      r"graph-perfect [+-]\d\.\d{3} \[", text)
-    assert R.main(argv) == 0  # finished runs are reused
+    assert R.main(argv + ["--breakdown"]) == 0  # finished runs are reused
     assert "reusing" in capsys.readouterr().out
+    # --breakdown: every run's test breakdown, then mean ± std over seeds per bin
+    agg = json.loads((base / "breakdown.json").read_text())["tables"]
+    assert [t["title"] for t in agg][0] == "per pedestrian pixel height"
+    for t in agg:
+        for row in ("lstm-perfect", "graph-perfect"):
+            docs = [json.loads((base / row / f"seed-{s}" / "test_breakdown.json").read_text())
+                    for s in (22742, 22743)]
+            counts = sum(c["count"] for c in t["rows"][row].values())
+            assert counts == docs[0]["totals"]["clips"] == 12  # the test split's windows
+            mine = next(x for x in docs[0]["tables"] if x["title"] == t["title"])
+            for r in mine["rows"]:
+                vals = [next(y for y in next(x for x in d["tables"] if x["title"] == t["title"])
+                             ["rows"] if y["bin"] == r["bin"])["f1"] for d in docs]
+                vals = [v for v in vals if v is not None]
+                if vals:
+                    assert t["rows"][row][r["bin"]]["mean"] == pytest.approx(np.mean(vals))
+    md = (base / "breakdown.md").read_text()
+    assert "### per pedestrian pixel height: F1 (count: clips)" in md
+    assert (base / "breakdown-per-pedestrian-pixel-height.png").stat().st_size > 1000
 
 
 def test_seeds_options_are_checked(data, tmp_path, capsys):
@@ -376,3 +395,22 @@ def test_cell_interval_is_that_of_the_mean_over_seeds(tmp_path):
     assert r["metrics"][m] == pytest.approx(mean)
     assert low < mean < high and not low < pooled < high  # pooled is near 0.23, mean 0.5
 
+
+
+def test_table_breakdown_aggregates_bins_over_seeds_by_hand():
+    from bsp_fast.training.table_breakdown import aggregate, format_aggregate
+
+    def doc(a, b):
+        return {"tables": [{"title": "per joint", "by": "joint", "count": "joints",
+                            "columns": {"mpjpe_mm": "MPJPE (mm)"},
+                            "rows": [{"bin": "hips", "count": 10, "mpjpe_mm": a},
+                                     {"bin": "head", "count": 10, "mpjpe_mm": b}]}]}
+
+    agg = aggregate({"lstm": [doc(10.0, None), doc(14.0, 30.0)], "mean": [doc(20.0, 40.0)]})
+    cells = agg[0]["rows"]
+    assert cells["lstm"]["hips"] == {"mean": 12.0, "std": pytest.approx(2 ** 1.5),
+                                     "seeds": 2, "count": 10.0}
+    assert cells["lstm"]["head"]["mean"] == 30.0 and cells["lstm"]["head"]["seeds"] == 1
+    assert cells["mean"]["hips"]["std"] == 0.0
+    md = format_aggregate(agg, {"lstm": "LSTM"}, 2, "## t")
+    assert "| hips | 12.0 ± 2.8 (n 10) | 20.0 (n 10) |" in md

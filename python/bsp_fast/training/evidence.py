@@ -318,6 +318,10 @@ def main_seeds(tab: dict, ns, rows, overrides) -> int:
     write_text(base / "results.json", json.dumps({**res, "findings": found,
                                                   "figures": [str(f) for f in figures]},
                                                  indent=1, default=str))
+    if ns.breakdown:
+        from .table_breakdown import table_breakdown
+
+        figures += table_breakdown(tab, res, ns.force)
     print(f"wrote {base / 'results.md'}" + (f" and {curves}" if curves else "")
           + "".join(f", {f}" for f in figures))
     return 0

@@ -170,6 +170,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dry-run", action="store_true",
                    help="write the per-row bsp-train configs and print the commands only")
     p.add_argument("--verbose", action="store_true", help="bsp-train's progress bars and tables")
+    p.add_argument("--breakdown", action="store_true",
+                   help="also the test breakdown of every row (bsp-eval --breakdown: per joint, "
+                        "size or distance bin, profile, missing joints), mean ± std over seeds: "
+                        "breakdown.md, breakdown.json and bar figures beside results.md")
     from .seeds import add_options
 
     add_options(p)  # --seeds, --split-seeds, --jobs
@@ -224,6 +228,10 @@ def main(argv=None) -> int:
                                "figures": [str(f) for f in figures]},
                               indent=1, default=str))):
         write_text(base / name, content)
+    if ns.breakdown:
+        from .table_breakdown import table_breakdown
+
+        figures += table_breakdown(tab, res, ns.force)
     print(f"wrote {base / 'results.md'}" + "".join(f", {f}" for f in figures))
     return 0
 

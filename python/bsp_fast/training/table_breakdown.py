@@ -1,0 +1,211 @@
+"""``bsp-reproduce TABLE --breakdown``: the test breakdown of every row of a table
+(``bsp-eval RUN --breakdown``'s tables per joint, size or distance bin, profile and
+missing-joint count), each bin's main value as mean ± std over the row's seeds, written as
+``breakdown.md`` and ``breakdown.json`` beside ``results.md`` with one bar figure per
+breakdown table (``breakdown-per-joint.png``, ...; error bars: ± one sample standard
+deviation over seeds).
+
+Each run's document is computed once and kept as ``RUN/test_breakdown.json``
+(``bsp-eval RUN --breakdown --save``); a later call reuses it unless it is older than the
+run's ``metrics.json`` (a run trained again) or ``--force`` is given.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["run_dirs", "run_breakdowns", "aggregate", "format_aggregate", "draw_breakdowns",
+           "table_breakdown", "MD", "JSON"]
+
+MD, JSON = "breakdown.md", "breakdown.json"
+# count-like columns of a breakdown table: never the value a bin is judged by
+_COUNTS = ("count", "joints", "crossing")
+
+
+def run_dirs(res: dict) -> list:
+    """``[(row, seed or None, run_dir)]`` of bsp-reproduce's results (one run per row, or
+    ``--seeds``); rows that read another row's trivial baseline have no run of their own."""
+    out = []
+    for name, r in res["results"].items():
+        if r.get("run_of") or r.get("source") == "initial" or \
+                str(r.get("run", "")).endswith("(initial metrics)"):
+            continue
+        if "seeds" in r:
+            out += [(name, seed, Path(one["run"])) for seed, one in r["seeds"].items()]
+        else:
+            out.append((name, None, Path(r["run"])))
+    return out
+
+
+def _fresh(run_dir: Path, file: Path) -> bool:
+    metrics = run_dir / "metrics.json"
+    return file.is_file() and (not metrics.is_file()
+                               or file.stat().st_mtime >= metrics.stat().st_mtime)
+
+
+def run_breakdowns(res: dict, force: bool = False, log=print) -> dict:
+    """``{row: [document per seed]}``: each run's saved breakdown, computed (and saved)
+    where missing or stale."""
+    from .eval_breakdown import FILE
+    from .evaluate import breakdown
+
+    docs: dict = {}
+    for name, seed, run_dir in run_dirs(res):
+        path = run_dir / FILE
+        if force or not _fresh(run_dir, path):
+            log(f"[{name}{'' if seed is None else f' seed {seed}'}] breakdown of {run_dir}")
+            breakdown(str(run_dir), save=True)
+        docs.setdefault(name, []).append(json.loads(path.read_text()))
+    return docs
+
+
+def _main_key(columns: dict) -> str:
+    return next(k for k in columns if k not in _COUNTS)
+
+
+def _stat(values: list) -> tuple:
+    v = np.array([np.nan if x is None else float(x) for x in values], float)
+    v = v[np.isfinite(v)]
+    if not len(v):
+        return math.nan, math.nan, 0
+    return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0, len(v)
+
+
+def aggregate(docs: dict) -> list:
+    """One entry per breakdown table (in the documents' order): ``title``, ``by``,
+    ``count`` (its unit), ``metric`` and ``label`` (the table's first value column),
+    ``bins`` and, per row, ``{bin: {"mean", "std", "seeds", "count"}}`` (``count``: the
+    mean over seeds; ``seeds``: how many had a value in the bin)."""
+    out = []
+    first = next(iter(docs.values()))[0]
+    for t_index, t0 in enumerate(first["tables"]):
+        key = _main_key(t0["columns"])
+        bins: list = []
+        per_row: dict = {}
+        for name, seed_docs in docs.items():
+            cells: dict = {}
+            for doc in seed_docs:
+                table = doc["tables"][t_index]
+                if table["title"] != t0["title"]:
+                    raise ValueError(f"breakdown of row {name}: table {t_index} is "
+                                     f"{table['title']!r}, expected {t0['title']!r}")
+                for r in table["rows"]:
+                    if r["bin"] not in bins:
+                        bins.append(r["bin"])
+                    c = cells.setdefault(r["bin"], {"values": [], "counts": []})
+                    c["values"].append(r.get(key))
+                    c["counts"].append(r["count"])
+            per_row[name] = {}
+            for b, c in cells.items():
+                mean, std, n = _stat(c["values"])
+                per_row[name][b] = {"mean": mean, "std": std, "seeds": n,
+                                    "count": float(np.mean(c["counts"]))}
+        out.append({"title": t0["title"], "by": t0["by"], "count": t0["count"],
+                    "metric": key, "label": t0["columns"][key], "bins": bins,
+                    "rows": per_row})
+    return out
+
+
+def _value(metric: str, x: float) -> str:
+    if metric.startswith("pck"):
+        return f"{100.0 * x:.1f}"
+    if metric.endswith("_mm"):
+        return f"{x:.1f}"
+    return f"{x:.3f}"
+
+
+def format_aggregate(agg: list, labels: dict, n_seeds: int, heading: str) -> str:
+    """Markdown: one table per breakdown table, bins down, rows across; a cell is
+    ``mean ± std (n COUNT)`` over the seeds with a value in that bin."""
+    lines = [heading, "",
+             f"Each cell: mean ± std over {n_seeds} seed(s) of the row, and the bin's "
+             "count (mean over seeds) in brackets; — where no seed has a value in the "
+             "bin.", ""]
+    for t in agg:
+        rows = list(t["rows"])
+        head = [t["by"]] + [labels.get(r, r) for r in rows]
+        lines += [f"### {t['title']}: {t['label']} (count: {t['count']})", "",
+                  "| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+        for b in t["bins"]:
+            cells = [str(b)]
+            for r in rows:
+                c = t["rows"][r].get(b)
+                if c is None or not c["seeds"]:
+                    cells.append("—" if c is None else f"— (n {c['count']:.0f})")
+                else:
+                    sd = f" ± {_value(t['metric'], c['std'])}" if c["seeds"] > 1 else ""
+                    cells.append(f"{_value(t['metric'], c['mean'])}{sd} (n {c['count']:.0f})")
+            lines.append("| " + " | ".join(cells) + " |")
+        lines.append("")
+    return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def _slug(title: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", title.lower()).strip("-")
+
+
+def draw_breakdowns(agg: list, labels: dict, out_dir, title: str, budget: str) -> list:
+    """One grouped bar figure per breakdown table (bars: rows; error bars: ± std over
+    seeds), ``OUT/breakdown-<table>.png``; returns the paths."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    from .curves import save_figure
+
+    written = []
+    for t in agg:
+        rows = list(t["rows"])
+        bins = t["bins"]
+        scale = 100.0 if t["metric"].startswith("pck") else 1.0
+        width = 0.8 / max(len(rows), 1)
+        wide = len(bins) > 8
+        f, ax = plt.subplots(figsize=(11 if wide else 7, 4.5))
+        x = np.arange(len(bins))
+        for i, r in enumerate(rows):
+            cells = [t["rows"][r].get(b) for b in bins]
+            mean = [scale * c["mean"] if c and c["seeds"] else np.nan for c in cells]
+            std = [scale * c["std"] if c and c["seeds"] else np.nan for c in cells]
+            ax.bar(x + (i - (len(rows) - 1) / 2) * width, mean, width, yerr=std,
+                   capsize=2, label=labels.get(r, r), error_kw={"lw": 0.8})
+        ax.set_xticks(x)
+        ax.set_xticklabels(bins, rotation=60 if wide else 0, ha="right" if wide else "center",
+                           fontsize=7 if wide else 8)
+        ax.set_ylabel(t["label"])
+        ax.set_xlabel(t["by"])
+        ax.grid(axis="y", alpha=0.3)
+        ax.legend(fontsize=7, title="mean ± std over seeds", title_fontsize=7)
+        ax.set_title(f"{title}: {t['title']}", fontsize=10)
+        f.text(0.99, 0.01, f"budget {budget}", ha="right", va="bottom", fontsize=7,
+               color="grey")
+        f.tight_layout()
+        written.append(save_figure(f, Path(out_dir) / f"breakdown-{_slug(t['title'])}.png"))
+    return written
+
+
+def table_breakdown(tab: dict, res: dict, force: bool = False, log=print) -> list:
+    """Everything ``--breakdown`` adds to a table's folder; returns the paths written."""
+    from ..atomic import write_text
+    from .breakdown_format import _plain
+
+    docs = run_breakdowns(res, force, log)
+    if not docs:
+        return []
+    agg = aggregate(docs)
+    labels = {r["name"]: r.get("label", r["name"]) for r in tab["rows"] if r["name"] in docs}
+    if len(set(labels.values())) < len(labels):  # e.g. an ablation grid: names tell rows apart
+        labels = {name: name for name in labels}
+    n_seeds = len(res.get("seeds") or [1])
+    base = Path(res["dir"])
+    heading = f"## {tab['title']}: test breakdown, budget {res['budget']}"
+    write_text(base / MD, format_aggregate(agg, labels, n_seeds, heading))
+    write_text(base / JSON, json.dumps(_plain({"table": tab["table"], "budget": res["budget"],
+                                              "seeds": res.get("seeds"), "tables": agg}),
+                                       indent=1) + "\n")
+    return [base / MD, base / JSON] + draw_breakdowns(agg, labels, base, tab["table"],
+                                                       res["budget"])
