@@ -48,13 +48,13 @@ def test_ablation_tables_load_by_name_with_the_documented_rows():
     rows = {r["name"]: r for r in cls["rows"]}
     grid = [(m, s, j) for m in ("lstm", "pedestrian_graph") for s in (0, 5)
             for j in (0, 0.3, 0.7187, 0.9328)]
-    plain = [r for r in cls["rows"] if not r.get("own_updates")
+    plain = [r for r in cls["rows"] if not r.get("own_updates") and not r.get("own_batch_size")
              and "use_visible" not in (r["options"].get("hp") or {})]
     assert sorted((r["options"]["model"], r["options"]["noise"], r["options"]["mjp"])
                   for r in plain) == sorted(grid)
     vis = [r for r in cls["rows"] if (r["options"].get("hp") or {}).get("use_visible")]
     assert len(vis) == 6 and all(r["options"]["noise"] == 5 for r in vis)
-    upd = [r for r in cls["rows"] if r.get("own_updates")]
+    upd = [r for r in cls["rows"] if r["name"].endswith("-upd")]
     assert len(upd) == 8
     for r in upd:  # the original's batch-1 updates: 40 epochs x 804 windows, 13 per epoch
         q = r["budgets"]["quick"]
@@ -62,6 +62,12 @@ def test_ablation_tables_load_by_name_with_the_documented_rows():
         assert q["early_stop"] == 619 and (q["epochs"] - 1) * 13 < q["max_steps"]
         assert "batch_size" not in q and "batch_size" not in r["options"]
     assert rows["graph-s5-m0.3-upd"]["options"] == rows["graph-s5-m0.3"]["options"]
+    b8 = [r for r in cls["rows"] if r["name"].endswith("-b8")]
+    assert len(b8) == 4 and all(r["options"]["model"] == "pedestrian_graph" for r in b8)
+    for r in b8:  # batch 8 over the quick budget's 40 epochs: ceil(804 / 8) = 101 per epoch
+        q = r["budgets"]["quick"]
+        assert q == {"batch_size": 8, "max_steps": 40 * 101, "epochs": 40, "early_stop": 10}
+        assert r["options"] == rows[r["name"][:-3]]["options"]
     assert "normaliser_fallback" in cls["metrics"]
     rel = load_table("ablation_relative_rot")
     assert {r.get("data_suffix") for r in rel["rows"]} == {None, "-bones5", "-motion"}
