@@ -414,3 +414,24 @@ def test_table_breakdown_aggregates_bins_over_seeds_by_hand():
     assert cells["mean"]["hips"]["std"] == 0.0
     md = format_aggregate(agg, {"lstm": "LSTM"}, 2, "## t")
     assert "| hips | 12.0 ± 2.8 (n 10) | 20.0 (n 10) |" in md
+
+
+def test_rows_of_different_datasets_are_resampled_independently():
+    num, den = _recordings(30, seed=3)
+    other = _recordings(24, seed=4)  # another dataset: other recordings, other count
+    # one group is the paired bootstrap itself
+    one = U.grouped_interval([[(num, den), (num + 5 * den, den)]], lambda v: v[1] - v[0])
+    assert one == U.paired_interval([(num, den), (num + 5 * den, den)], lambda v: v[1] - v[0])
+    two = U.grouped_interval([[(num, den)], [other]], lambda v: v[1] - v[0])
+    assert two.value == pytest.approx(other[0].sum() / other[1].sum() - num.sum() / den.sum())
+    assert two.low < two.value < two.high and two.n == 24
+    # a dataset against itself shifted by a constant: unpaired, so the interval is wide
+    shifted = U.grouped_interval([[(num, den)], [(num + 5 * den, den)]], lambda v: v[1] - v[0])
+    assert shifted.value == pytest.approx(5.0) and shifted.high - shifted.low > 1.0
+    # E._grouped restores the callers' order after grouping by dataset
+    items = [(list(range(24)), other[0], other[1], np.nan), (list(range(30)), num, den, np.nan),
+             (list(range(24)), other[0] + 2 * other[1], other[1], np.nan)]
+    iv = E._grouped(items, ["b", "a", "b"], lambda v: v[2] - v[0] + 0 * v[1])
+    assert iv.value == pytest.approx(2.0) and iv.high - iv.low < 1e-9
+    with pytest.raises(ValueError, match="1-d arrays of one length"):
+        U.grouped_interval([[(num, den[:-1])]], lambda v: v[0])

@@ -23,7 +23,8 @@ import numpy as np
 from ..defaults import SEED
 
 __all__ = ["Interval", "CONFIDENCE", "N_RESAMPLES", "YES", "NO", "UNSURE", "pool",
-           "align", "ratio", "ratio_interval", "paired_interval", "mark", "combine_marks"]
+           "align", "ratio", "ratio_interval", "paired_interval", "grouped_interval", "mark",
+           "combine_marks"]
 
 CONFIDENCE = 0.95
 N_RESAMPLES = 2000
@@ -128,6 +129,49 @@ def paired_interval(rows: list, fn, *, empty=float("nan"), confidence: float = C
         return Interval(value, float("nan"), float("nan"), n)
     low, high = _bootstrap(arrays, statistic, confidence, n_resamples, seed)
     return Interval(value, low, high, n)
+
+
+def grouped_interval(groups: list, fn, *, empty=float("nan"),
+                     confidence: float = CONFIDENCE, n_resamples: int = N_RESAMPLES,
+                     seed: int = SEED) -> Interval:
+    """Like :func:`paired_interval` for rows scored on **different** test sets (e.g. two
+    datasets): ``groups`` is a list of groups, each a list of ``(num, den)`` rows aligned
+    on that group's recordings. Recordings are resampled jointly within a group and
+    independently between groups (``scipy.stats.bootstrap`` with ``paired=False`` over
+    each group's recording indices). ``fn`` gets the row values in group order; ``empty``
+    one value or one per row in that order. ``n`` is the smallest group's count."""
+    from scipy.stats import bootstrap
+
+    _check(confidence, n_resamples)
+    groups = [[tuple(np.asarray(a, dtype=np.float64) for a in nd) for nd in g] for g in groups]
+    sizes = []
+    for g in groups:
+        n = {a.shape for nd in g for a in nd}
+        if not g or len(n) != 1 or len(next(iter(n))) != 1:
+            raise ValueError(f"each group's num and den must be 1-d arrays of one length "
+                             f"(one entry per recording), got shapes {sorted(n)}")
+        sizes.append(next(iter(n))[0])
+    n_rows = sum(len(g) for g in groups)
+    empties = list(empty) if isinstance(empty, (list, tuple)) else [empty] * n_rows
+
+    def statistic(*idx, axis=-1):
+        values, k = [], 0
+        for g, ix in zip(groups, idx):
+            ix = np.asarray(ix, dtype=np.int64)
+            for num, den in g:
+                values.append(ratio(num[ix], den[ix], -1, empties[k]))
+                k += 1
+        return np.asarray(fn(values), dtype=np.float64)
+
+    full = [np.arange(n) for n in sizes]
+    value = float(statistic(*full))
+    if min(sizes) < 2 or not np.isfinite(value):
+        return Interval(value, float("nan"), float("nan"), min(sizes))
+    res = bootstrap(tuple(full), statistic, paired=False, vectorized=True, axis=-1,
+                    method="percentile", confidence_level=confidence,
+                    n_resamples=n_resamples, random_state=np.random.default_rng(seed))
+    return Interval(value, float(res.confidence_interval.low),
+                    float(res.confidence_interval.high), min(sizes))
 
 
 def mark(interval: Interval, side: int = 1) -> str:

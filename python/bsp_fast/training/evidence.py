@@ -95,17 +95,40 @@ def _seed_mean(counts: list, fn):
     return stat
 
 
-def _seed_interval(sums: "_Sums", parts: list, fn):
+def _grouped(items: list, keys, stat):
+    """The interval of ``stat(values in items' order)`` where ``items`` are ``(recordings,
+    num, den, empty)``: aligned on common recordings and resampled jointly when every key
+    is the same (one test set), else aligned within each key's group and resampled
+    independently between groups (rows of different datasets share no recordings)."""
+    keys = list(keys) if keys is not None else [0] * len(items)
+    if len(set(keys)) == 1:
+        _, aligned = U.align([s[:3] for s in items])
+        return U.paired_interval(aligned, stat, empty=[s[3] for s in items])
+    order = list(dict.fromkeys(keys))
+    groups, perm = [], []
+    for key in order:
+        idx = [i for i, k in enumerate(keys) if k == key]
+        groups.append(U.align([items[i][:3] for i in idx])[1])
+        perm += idx
+    back = np.argsort(perm)  # group order -> items' order
+
+    def in_order(values):
+        return stat([values[j] for j in back])
+    return U.grouped_interval(groups, in_order, empty=[items[i][3] for i in perm])
+
+
+def _seed_interval(sums: "_Sums", parts: list, fn, data_keys=None):
     """The bootstrap interval of ``fn`` of the rows' **means over seeds** (the tables'
-    cells), resampling the test recordings jointly for every row and seed; None when a row
-    has no per-recording sums or its seeds saw different recordings (``--split-seeds``)."""
+    cells), resampling the test recordings jointly for every row and seed of one dataset
+    (``data_keys``: one key per part; parts of different keys are resampled
+    independently); None when a row has no per-recording sums or its seeds saw different
+    recordings (``--split-seeds``)."""
     per = [sums.per_seed(row, metric, initial) for row, metric, initial in parts]
     if any(p is None for p in per):
         return None
     flat = [s for p in per for s in p]
-    _, aligned = U.align([s[:3] for s in flat])
-    return U.paired_interval(aligned, _seed_mean([len(p) for p in per], fn),
-                             empty=[s[3] for s in flat])
+    keys = None if data_keys is None else [k for k, p in zip(data_keys, per) for _ in p]
+    return _grouped(flat, keys, _seed_mean([len(p) for p in per], fn))
 
 
 def _values(r: dict, metric: str) -> list:
@@ -140,17 +163,25 @@ def summarise(tab: dict, res: dict) -> dict:
 
 
 # ---------------------------------------------------------------------- findings
-def _interval(sums: _Sums, parts: list, fn):
+def _data_key(tab: dict, row: str) -> str:
+    """Which test set a row is scored on: rows with a ``data_suffix`` read another
+    dataset (docs/reproduce.md, ablation tables)."""
+    spec = next((r for r in tab["rows"] if r["name"] == row), {})
+    return spec.get("data_suffix") or ""
+
+
+def _interval(sums: _Sums, parts: list, fn, tab: dict | None = None):
     """``parts``: ``(row, metric, initial)`` each; ``fn(values) -> statistic`` of the
-    rows' means over seeds (pooled over seeds when the seeds' splits differ)."""
-    iv = _seed_interval(sums, parts, fn)
+    rows' means over seeds (pooled over seeds when the seeds' splits differ). Rows of
+    different datasets (``tab``'s ``data_suffix``) are resampled independently."""
+    keys = None if tab is None else [_data_key(tab, row) for row, _, _ in parts]
+    iv = _seed_interval(sums, parts, fn, keys)
     if iv is not None:
         return iv
     pooled = [sums.pooled(row, metric, initial) for row, metric, initial in parts]
     if any(p is None for p in pooled):
         return None
-    _, aligned = U.align([p[:3] for p in pooled])
-    return U.paired_interval(aligned, fn, empty=[p[3] for p in pooled])
+    return _grouped(pooled, keys, fn)
 
 
 def _text(tab, metric, label: str, iv) -> str:
@@ -203,7 +234,7 @@ def _finding(tab, f, sums: _Sums, have) -> tuple:
         return "rows not run", "n/a", None
     texts, marks, first = [], [], None
     for label, parts, fn, side in pieces:
-        iv = _interval(sums, parts, fn)
+        iv = _interval(sums, parts, fn, tab)
         if iv is None:
             return "no per-recording sums", "n/a", None
         first = first or iv
