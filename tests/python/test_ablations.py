@@ -68,6 +68,9 @@ def test_ablation_tables_load_by_name_with_the_documented_rows():
         q = r["budgets"]["quick"]
         assert q == {"batch_size": 8, "max_steps": 40 * 101, "epochs": 40, "early_stop": 10}
         assert r["options"] == rows[r["name"][:-3]]["options"]
+    b1 = [r for r in cls["rows"] if r["name"].endswith("-b1")]
+    assert [r["budgets"]["quick"] for r in b1] == [
+        {"batch_size": 1, "max_steps": 40 * 804, "epochs": 40, "early_stop": 10}] * 4
     assert "normaliser_fallback" in cls["metrics"]
     rel = load_table("ablation_relative_rot")
     assert {r.get("data_suffix") for r in rel["rows"]} == {None, "-bones5", "-motion"}
