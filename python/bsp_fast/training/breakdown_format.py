@@ -8,17 +8,17 @@ import io
 import json
 import math
 
-__all__ = ["format_breakdown", "to_json", "FORMATS"]
+__all__ = ["format_breakdown", "to_json", "plain", "FORMATS"]
 
 FORMATS = ("md", "markdown", "csv", "json")
 
 
-def _plain(value):
+def plain(value):
     """JSON-safe copy: NaN/inf become None, NumPy scalars plain numbers."""
     if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
+        return {str(k): plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
+        return [plain(v) for v in value]
     if hasattr(value, "item") and not isinstance(value, (str, bytes)):
         value = value.item()
     if isinstance(value, float) and not math.isfinite(value):
@@ -28,7 +28,7 @@ def _plain(value):
 
 def to_json(doc: dict) -> str:
     """``doc`` as JSON text (NaN and infinite values as null)."""
-    return json.dumps(_plain(doc), indent=1)
+    return json.dumps(plain(doc), indent=1)
 
 
 def _cell(key: str, value) -> str:
@@ -76,7 +76,7 @@ def format_breakdown(doc: dict, fmt: str = "md", heading: str | None = None) -> 
         for t in tables:
             for r in t["rows"]:
                 for k in t["columns"]:
-                    v = _plain(r.get(k))
+                    v = plain(r.get(k))
                     w.writerow([t["title"], r["bin"], t["count"], r["count"], k,
                                 "" if v is None else repr(v) if isinstance(v, float) else v])
         return buf.getvalue().rstrip("\n")

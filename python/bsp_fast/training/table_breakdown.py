@@ -191,7 +191,7 @@ def draw_breakdowns(agg: list, labels: dict, out_dir, title: str, budget: str) -
 def table_breakdown(tab: dict, res: dict, force: bool = False, log=print) -> list:
     """Everything ``--breakdown`` adds to a table's folder; returns the paths written."""
     from ..atomic import write_text
-    from .breakdown_format import _plain
+    from .breakdown_format import plain
 
     docs = run_breakdowns(res, force, log)
     if not docs:
@@ -204,7 +204,7 @@ def table_breakdown(tab: dict, res: dict, force: bool = False, log=print) -> lis
     base = Path(res["dir"])
     heading = f"## {tab['title']}: test breakdown, budget {res['budget']}"
     write_text(base / MD, format_aggregate(agg, labels, n_seeds, heading))
-    write_text(base / JSON, json.dumps(_plain({"table": tab["table"], "budget": res["budget"],
+    write_text(base / JSON, json.dumps(plain({"table": tab["table"], "budget": res["budget"],
                                               "seeds": res.get("seeds"), "tables": agg}),
                                        indent=1) + "\n")
     return [base / MD, base / JSON] + draw_breakdowns(agg, labels, base, tab["table"],
