@@ -170,10 +170,14 @@ def test_autoencoder_and_pose_findings():
     res = {"pose_cnn": {"metrics": {"pck_0.05": 0.9}, "initial": {"pck_0.05": 0.5}},
            "average_skeleton": {"metrics": {"pck_0.05": 0.5}, "initial": {"pck_0.05": 0.5}}}
     assert [f["status"] for f in R.evaluate_findings(pose, res)] == [
-        "not reproduced", "reproduced", "reproduced"]
+        "not reproduced", "reproduced", "reproduced", "reproduced", "n/a"]
     res["pose_cnn"]["metrics"]["pck_0.05"] = 0.53
+    res["pose_cnn_mask_joints"] = {"metrics": {"pck_0.05": 0.6}, "initial": {"pck_0.05": 0.5}}
     found = R.evaluate_findings(pose, res)
-    assert [f["status"] for f in found] == ["reproduced", "not reproduced", "not reproduced"]
+    assert [f["status"] for f in found] == ["reproduced", "not reproduced", "not reproduced",
+                                            "reproduced", "reproduced"]
+    res["pose_cnn"]["metrics"]["pck_0.05"] = 0.49  # below the average skeleton
+    assert R.evaluate_findings(pose, res)[3]["status"] == "not reproduced"
     # our target is not tested on the report's numbers (it printed no such claim)
     assert found[2]["report"] == "our target (not in the report)"
 
