@@ -218,17 +218,19 @@ def test_worker_killed_mid_task_is_retried(ds, single, client, tmp_path):
 
 def test_cli_interrupted_leaves_no_output(ds, tmp_path):
     out = tmp_path / "clips.h5"
-    env = dict(os.environ, BSP_FAST_TEST_DASK_HOOK="sleep:shard:60",
+    # the shard tasks sleep far longer than any wait below: on a loaded machine the cluster
+    # can take most of a minute to start, and the signal must land while they sleep
+    env = dict(os.environ, BSP_FAST_TEST_DASK_HOOK="sleep:shard:900",
                PYTHONPATH=os.pathsep.join([str(REPO / "python"), os.environ.get("PYTHONPATH", "")]))
     p = subprocess.Popen([sys.executable, "-m", "bsp_fast", "convert", str(ds), str(out),
                           "--scheduler", "dask", "--shards", "2", "--crop-size", "24", "--quiet"],
                          env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     t0 = time.time()
-    while not list(tmp_path.glob(".clips.h5.tmp-*.shards")) and time.time() - t0 < 60:
+    while not list(tmp_path.glob(".clips.h5.tmp-*.shards")) and time.time() - t0 < 240:
         time.sleep(0.2)
     time.sleep(1.0)  # the tasks are sleeping in the workers
     p.send_signal(signal.SIGINT)
-    _, err = p.communicate(timeout=60)
+    _, err = p.communicate(timeout=120)
     assert p.returncode == 130, err[-2000:]
     assert "interrupted; no output written" in err
     assert list(tmp_path.iterdir()) == []
