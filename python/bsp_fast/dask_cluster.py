@@ -129,7 +129,9 @@ def test_hook(task: str, index: int) -> None:
     * ``kill:TASK:INDEX:MARKER``: the first attempt of task ``TASK`` (``shard`` or ``clip``)
       number ``INDEX`` creates the file ``MARKER`` and ends its worker process with
       ``os._exit`` (the next attempt finds the marker and runs normally);
-    * ``sleep:TASK:SECONDS``: every such task sleeps first (to interrupt a run);
+    * ``sleep:TASK:SECONDS[:MARKER]``: every such task sleeps first (to interrupt a run),
+      after creating the file ``MARKER`` when given (so a test signals only once a task
+      is sleeping, not while the cluster is still starting);
     * ``@PATH``: the spec is read from the file PATH when it exists (so that worker
       processes restarted after a kill see what the test sets).
     """
@@ -150,7 +152,9 @@ def test_hook(task: str, index: int) -> None:
             return
         os.close(fd)
         os._exit(17)
-    if parts[0] == "sleep" and len(parts) == 3 and parts[1] == task:
+    if parts[0] == "sleep" and len(parts) in (3, 4) and parts[1] == task:
         import time
 
+        if len(parts) == 4:
+            open(parts[3], "a", encoding="utf-8").close()
         time.sleep(float(parts[2]))

@@ -218,17 +218,20 @@ def test_worker_killed_mid_task_is_retried(ds, single, client, tmp_path):
 
 def test_cli_interrupted_leaves_no_output(ds, tmp_path):
     out = tmp_path / "clips.h5"
-    # the shard tasks sleep far longer than any wait below: on a loaded machine the cluster
-    # can take most of a minute to start, and the signal must land while they sleep
-    env = dict(os.environ, BSP_FAST_TEST_DASK_HOOK="sleep:shard:900",
+    sleeping = tmp_path.parent / f"{tmp_path.name}-sleeping"  # outside the output folder
+    # the signal is sent once a shard task is sleeping (the hook's marker), not while the
+    # cluster is still starting: under load (a full make test beside training runs) a
+    # SIGINT sent during the cluster's start was lost and the conversion ran to its end
+    env = dict(os.environ, BSP_FAST_TEST_DASK_HOOK=f"sleep:shard:900:{sleeping}",
                PYTHONPATH=os.pathsep.join([str(REPO / "python"), os.environ.get("PYTHONPATH", "")]))
     p = subprocess.Popen([sys.executable, "-m", "bsp_fast", "convert", str(ds), str(out),
                           "--scheduler", "dask", "--shards", "2", "--crop-size", "24", "--quiet"],
                          env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     t0 = time.time()
-    while not list(tmp_path.glob(".clips.h5.tmp-*.shards")) and time.time() - t0 < 240:
+    while not sleeping.exists() and time.time() - t0 < 240 and p.poll() is None:
         time.sleep(0.2)
-    time.sleep(1.0)  # the tasks are sleeping in the workers
+    assert sleeping.exists(), "no shard task started within 240 s"
+    time.sleep(0.5)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=120)
     assert p.returncode == 130, err[-2000:]
