@@ -80,15 +80,6 @@ def ratio(num, den, axis: int = -1, empty: float = float("nan")):
         return np.where(d > 0, n / np.where(d > 0, d, 1.0), empty)
 
 
-def _bootstrap(arrays: list, statistic, confidence: float, n_resamples: int, seed: int):
-    from scipy.stats import bootstrap
-
-    res = bootstrap(tuple(arrays), statistic, paired=True, vectorized=True, axis=-1,
-                    method="percentile", confidence_level=confidence,
-                    n_resamples=n_resamples, random_state=np.random.default_rng(seed))
-    return float(res.confidence_interval.low), float(res.confidence_interval.high)
-
-
 def _check(confidence: float, n_resamples: int) -> None:
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
@@ -116,19 +107,10 @@ def paired_interval(rows: list, fn, *, empty=float("nan"), confidence: float = C
     if len(n) != 1 or len(next(iter(n))) != 1:
         raise ValueError(f"every num and den must be a 1-d array of the same length (one "
                          f"entry per recording), got shapes {sorted(n)}")
-    n = next(iter(n))[0]
-    empties = list(empty) if isinstance(empty, (list, tuple)) else [empty] * len(rows)
-
-    def statistic(*arrs, axis=-1):
-        values = [ratio(arrs[2 * i], arrs[2 * i + 1], axis, empties[i])
-                  for i in range(len(rows))]
-        return np.asarray(fn(values), dtype=np.float64)
-
-    value = float(statistic(*arrays))
-    if n < 2 or not np.isfinite(value):
-        return Interval(value, float("nan"), float("nan"), n)
-    low, high = _bootstrap(arrays, statistic, confidence, n_resamples, seed)
-    return Interval(value, low, high, n)
+    # one test set is the one-group case: recordings resampled jointly for every row
+    # (scipy resamples a paired bootstrap's indices the same way)
+    return grouped_interval([rows], fn, empty=empty, confidence=confidence,
+                            n_resamples=n_resamples, seed=seed)
 
 
 def grouped_interval(groups: list, fn, *, empty=float("nan"),

@@ -97,16 +97,12 @@ def _seed_mean(counts: list, fn):
 
 def _grouped(items: list, keys, stat):
     """The interval of ``stat(values in items' order)`` where ``items`` are ``(recordings,
-    num, den, empty)``: aligned on common recordings and resampled jointly when every key
-    is the same (one test set), else aligned within each key's group and resampled
-    independently between groups (rows of different datasets share no recordings)."""
+    num, den, empty)``: aligned on the recordings common to each key's group (one test
+    set), resampled jointly within a group and independently between groups (rows of
+    different datasets share no recordings); one key (the default) is the paired case."""
     keys = list(keys) if keys is not None else [0] * len(items)
-    if len(set(keys)) == 1:
-        _, aligned = U.align([s[:3] for s in items])
-        return U.paired_interval(aligned, stat, empty=[s[3] for s in items])
-    order = list(dict.fromkeys(keys))
     groups, perm = [], []
-    for key in order:
+    for key in dict.fromkeys(keys):
         idx = [i for i, k in enumerate(keys) if k == key]
         groups.append(U.align([items[i][:3] for i in idx])[1])
         perm += idx
