@@ -14,7 +14,7 @@ APT_PACKAGES=(
 PIP_PACKAGES=(
   "numpy>=1.22" "h5py>=3.8" "pyyaml>=6" "tqdm>=4.60" "pandas>=2" "pytest>=7" "av>=12"
   "pillow>=10" "pyarrow>=14" "scikit-build-core>=0.10" "pybind11>=2.12"
-  "opencv-python-headless>=4.8" "matplotlib>=3.5"
+  "opencv-python-headless>=4.8" "matplotlib>=3.5" "scipy>=1.9" "pycocotools>=2.0.6"
   # Pinned exactly: this version's CPU build is on the machine; a looser pin pulls a
   # multi-GB CUDA build.
   "torch==2.13.0" "lightning>=2.2" "jsonargparse>=4.39,<5"
@@ -48,7 +48,7 @@ import importlib.metadata as md, sys
 need = {"numpy": "1.22", "h5py": "3.8", "PyYAML": "6", "tqdm": "4.60", "pandas": "2",
         "pytest": "7", "av": "12", "pillow": "10", "pyarrow": "14",
         "scikit-build-core": "0.10", "pybind11": "2.12", "opencv-python-headless": "4.8",
-        "matplotlib": "3.5",
+        "matplotlib": "3.5", "scipy": "1.9", "pycocotools": "2.0",
         "torch": "2.13", "lightning": "2.2", "jsonargparse": "4.39", "dask": "2026.8",
         "distributed": "2026.8"}
 def v(s): return tuple(int(x) for x in s.split(".")[:2] if x.isdigit())

@@ -35,12 +35,12 @@ def main(argv=None) -> int:
         from bsp_fast.synth.cli import main as synth_main
 
         return synth_main(argv[1:])
-    training = {"train": "train", "eval": "evaluate", "predict": "predict",
-                "reproduce": "reproduce"}
+    training = {"train": "bsp_fast.training.train", "eval": "bsp_fast.training.evaluate",
+                "predict": "bsp_fast.training.predict", "reproduce": "bsp_fast.reproduction.cli"}
     if argv and argv[0] in training:
         import importlib
 
-        module = importlib.import_module(f"bsp_fast.training.{training[argv[0]]}")
+        module = importlib.import_module(training[argv[0]])
         return module.main(argv[1:])
     tools = {"preview": "bsp_fast.preview.cli", "check": "bsp_fast.check.cli",
              "cache": "bsp_fast.data.cache_cli",

@@ -1,7 +1,8 @@
 """Optional dependencies: a missing one is an ImportError that names the extra to install.
 
 Every extra of ``pyproject.toml`` is here: torch (torch, lightning, torchmetrics,
-matplotlib for bsp-train's curves.png, jsonargparse for its command line), preview (cv2,
+matplotlib for bsp-train's curves.png, jsonargparse for its command line, scipy for
+bsp-reproduce's bootstrap intervals), preview (cv2,
 matplotlib), distributed (dask, distributed) and loggers (tensorboard, wandb for
 ``bsp-train --logger``).
 """
@@ -14,7 +15,7 @@ __all__ = ["require", "require_any", "install_hint", "EXTRAS"]
 
 #: The extra that provides each optional top-level module (its default one).
 EXTRAS = {"torch": "torch", "lightning": "torch", "torchmetrics": "torch",
-          "jsonargparse": "torch", "cv2": "preview", "matplotlib": "preview",
+          "jsonargparse": "torch", "scipy": "torch", "cv2": "preview", "matplotlib": "preview",
           "dask": "distributed", "distributed": "distributed", "tensorboard": "loggers",
           "tensorboardX": "loggers", "wandb": "loggers"}
 #: pip's name of a module whose import name differs.

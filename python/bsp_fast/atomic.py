@@ -13,6 +13,12 @@ under :func:`temp_path` beside its target and then calls :func:`publish`:
   supported (another OS, some network filesystems) the old folder is first moved aside
   to ``.NAME.old-*`` and deleted after the rename.
 
+One output rule for every command (:func:`check_outputs`, before any work): no output is,
+holds or would replace one of the command's own inputs, and no two outputs are one file,
+with or without ``--force``, through symlinks and hard links too. The refusal is an
+:class:`OutputOverlapError`; a command's ``main()`` prints it with :func:`refuse` as one
+line ``PROG: error: ...`` on stderr and exits 2.
+
 ``BSP_ATOMIC_TEST_KILL=STEP`` (tests only) sends SIGKILL to the process at a step of
 :func:`publish` (``before``, ``swapped``), to check the above.
 """
@@ -21,17 +27,115 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import errno
+import fnmatch
 import os
 import shutil
 import signal
+import sys
 import uuid
 from pathlib import Path
 
-__all__ = ["temp_path", "publish", "remove", "atomic_output", "write_bytes", "write_text"]
+__all__ = ["temp_path", "publish", "remove", "atomic_output", "write_bytes", "write_text",
+           "OutputOverlapError", "check_outputs", "refuse", "OVERLAP_EXIT", "DATASET_FILES"]
 
 _AT_FDCWD = -100
 _RENAME_NOREPLACE = 1
 _RENAME_EXCHANGE = 2
+
+
+class OutputOverlapError(ValueError):
+    """An output that is, holds or would replace one of the command's inputs, or two
+    outputs that are one file. Refused with or without ``force``; exit code 2."""
+
+
+#: the exit code of a refused output (a bad argument)
+OVERLAP_EXIT = 2
+
+#: the files a reader of a CARLA-BSP dataset directory reads (data.csv, config.yaml, the
+#: media of clips/): an output inside a dataset directory must not match these
+DATASET_FILES = ("*.csv", "*.mp4", "*.apng", "*.png", "*.yaml")
+
+
+def _named(items, default: str) -> list:
+    """``[(name, Path)]`` from paths or ``(name, path)`` pairs; None paths left out."""
+    out = []
+    for item in items or ():
+        name, path = item if isinstance(item, tuple) else (default, item)
+        if path is not None:
+            out.append((name, Path(os.fspath(path))))
+    return out
+
+
+def _real(path: Path) -> Path:
+    return Path(os.path.realpath(path))
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    if _real(a) == _real(b):
+        return True
+    try:
+        return os.path.samefile(a, b)  # hard links: the same inode under two names
+    except OSError:
+        return False
+
+
+def check_outputs(inputs=(), outputs=(), *, read_dirs=()) -> None:
+    """The one output rule of every command, checked before any work.
+
+    ``inputs`` and ``outputs`` are paths or ``(name, path)`` pairs (the name says what the
+    path is in messages, e.g. ``("--images", p)``; defaults "the input" and "output");
+    None paths are skipped. Raises :class:`OutputOverlapError` (one line naming both
+    paths) when
+
+    * an output is an input: the same real path (symlinks resolved, ``..`` too) or the
+      same file (a hard link);
+    * an output folder holds an input (replacing the folder would delete it);
+    * an output lies below one of ``read_dirs``, ``(name, folder, patterns)``: a folder
+      the command reads, whose files matching one of the glob ``patterns`` (on the file
+      name, case-insensitive, at any depth) are inputs; ``patterns=None``: any path
+      inside the folder;
+    * two outputs are one file.
+    """
+    ins, outs = _named(inputs, "the input"), _named(outputs, "output")
+    for oname, out in outs:
+        real = _real(out)
+        for iname, inp in ins:
+            if _same_file(out, inp):
+                raise OutputOverlapError(f"{oname} {out} is {iname} {inp}; refusing to "
+                                         "overwrite it (choose another output path)")
+            if real in _real(inp).parents:
+                raise OutputOverlapError(f"{oname} {out} holds {iname} {inp}; refusing to "
+                                         "replace it (choose another output path)")
+        for dname, folder, patterns in read_dirs or ():
+            if folder is None:
+                continue
+            top = _real(Path(os.fspath(folder)))
+            if top not in real.parents:
+                continue
+            if patterns is None:
+                raise OutputOverlapError(f"{oname} {out} is inside {dname} {folder}, which "
+                                         "this command reads; refusing to write there "
+                                         "(choose another output path)")
+            name = real.name.lower()
+            if any(fnmatch.fnmatchcase(name, p.lower()) for p in patterns):
+                kind = f"{real.suffix} " if real.suffix else ""
+                raise OutputOverlapError(
+                    f"{oname} {out} would replace {dname}'s {kind}file {real}; refusing "
+                    "to overwrite an input (choose another output path)")
+    for i, (aname, a) in enumerate(outs):
+        for bname, b in outs[i + 1:]:
+            if _same_file(a, b):
+                raise OutputOverlapError(f"{aname} {a} and {bname} {b} are the same file; "
+                                         "refusing to write both (choose different output "
+                                         "paths)")
+
+
+def refuse(prog: str, exc: BaseException, file=None) -> int:
+    """The command-line side of :func:`check_outputs`: prints ``PROG: error: MESSAGE`` as
+    one line on stderr (``file``) and returns :data:`OVERLAP_EXIT` (2) for ``main()``."""
+    text = str(exc).replace("\r", " ").replace("\n", " ")
+    print(f"{prog}: error: {text}", file=sys.stderr if file is None else file)
+    return OVERLAP_EXIT
 
 
 def temp_path(target, suffix: str = "") -> Path:

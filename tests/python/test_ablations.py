@@ -16,11 +16,11 @@ import torch
 from bsp_fast.data import ClipDataset
 from bsp_fast.data import functional as F
 from bsp_fast.data.testing import write_clip_file
-from bsp_fast.training import reproduce as R
+from bsp_fast import reproduction as R
 from bsp_fast.training.curves import read_logs
-from bsp_fast.training.figures import check_figures, figure_series
+from bsp_fast.reproduction.figures import check_figures, figure_series
 from bsp_fast.training.scoring import TaskMetrics
-from bsp_fast.training.table_files import check_budget_rule, load_table, row_data, table_names
+from bsp_fast.reproduction.table_files import check_budget_rule, load_table, row_data, table_names
 
 ROOT = Path(__file__).resolve().parents[2]
 ABLATIONS = ("ablation_classifier", "ablation_relative_rot", "ablation_poseformer")

@@ -115,13 +115,21 @@ def test_bsp_eval_box_noise_scores_noisy_crops(converted, tmp_path):
     run = bsp_fast.train("pose_estimation", "pose_cnn", data=converted, out=tmp_path / "run",
                          epochs=1, batch_size=4, limit_batches=2, crop_size=S, quiet=True,
                          hp={"width": 4, "hidden": 16})
-    every = dict(limit_batches=0)  # the whole test split (the run itself read 2 batches)
-    plain = evaluate(run.run_dir, "test", **every)
-    noisy = evaluate(run.run_dir, "test", box_noise=(0.1, 0.05), **every)
-    again = evaluate(run.run_dir, "test", box_noise=(0.1, 0.05), batch_size=1, **every)
+    plain = evaluate(run.run_dir, "test")  # the whole split (the run itself read 2 batches)
+    noisy = evaluate(run.run_dir, "test", box_noise=(0.1, 0.05))
     assert noisy.metrics["pck_0.05"] != plain.metrics["pck_0.05"]
-    assert again.metrics["pck_0.05"] == pytest.approx(noisy.metrics["pck_0.05"])  # per clip
-    zero = evaluate(run.run_dir, "test", box_noise=(0.0, 0.0), **every)
+    # the boxes are drawn per clip: any batch size or worker count, the same scores (PCK is
+    # a ratio of counts: exactly). Not the loss: the training loss is normalised per batch
+    # by its visible joints, so its clip-weighted mean over batches moves with the batch
+    # size (~1e-4 relative here, with or without box noise); no table reports it.
+    for batch, workers in ((1, 0), (7, 0), (64, 0), (7, 2), (64, 2)):
+        again = evaluate(run.run_dir, "test", box_noise=(0.1, 0.05), batch_size=batch,
+                         workers=workers)
+        assert again.clips == noisy.clips
+        for k, v in noisy.metrics.items():
+            if k != "loss":
+                assert again.metrics[k] == v, (k, batch, workers)
+    zero = evaluate(run.run_dir, "test", box_noise=(0.0, 0.0))
     assert zero.metrics == plain.metrics
     with pytest.raises(SystemExit):
         eval_main([str(run.run_dir), "--box-noise", "0.1"])
@@ -132,7 +140,7 @@ def test_seeds_pose_table_scores_noisy_boxes_per_seed(converted, tmp_path, capsy
     import json
     from pathlib import Path
 
-    from bsp_fast.training import reproduce as R
+    from bsp_fast import reproduction as R
 
     argv = ["pose_estimation", "--data", str(converted), "--budget", "smoke", "--out",
             str(tmp_path), "--rows", "pose_cnn", "--seeds", "2", "--jobs", "1", "--set",

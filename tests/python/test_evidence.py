@@ -20,9 +20,9 @@ from bsp_fast.data import ClipDataset
 from bsp_fast.data.testing import write_clip_file
 from bsp_fast.metrics import uncertainty as U
 from bsp_fast.skeleton import HIPS
-from bsp_fast.training import evidence as E
-from bsp_fast.training import reproduce as R
-from bsp_fast.training import seeds as S
+from bsp_fast.reproduction import evidence as E
+from bsp_fast import reproduction as R
+from bsp_fast.reproduction import runner as S
 from bsp_fast.training.scoring import TaskMetrics
 from bsp_fast.training.train import resolve_precision
 
@@ -150,7 +150,7 @@ def test_findings_marks_on_known_cases(tmp_path):
     assert drop["status"] == "reproduced" and "size agrees with the report's 10.0" in drop["ours"]
     res = _fake_results(tmp_path, ae, {"clean": clean, "noisy": clean - 0.3})
     assert "size differs from the report's 10.0 ± 5.0" in E.evaluate_findings(ae, res)[1]["ours"]
-    table = E.format_table(ae, res, E.evaluate_findings(ae, res))
+    table = R.format_table(ae, res, E.evaluate_findings(ae, res))
     assert re.search(r"\| clean \| .* \| \d+\.\d ± 0\.0 \[\d+\.\d, \d+\.\d\] \|", table)
 
 
@@ -398,7 +398,7 @@ def test_cell_interval_is_that_of_the_mean_over_seeds(tmp_path):
 
 
 def test_table_breakdown_aggregates_bins_over_seeds_by_hand():
-    from bsp_fast.training.table_breakdown import aggregate, format_aggregate
+    from bsp_fast.reproduction.table_breakdown import aggregate, format_aggregate
 
     def doc(a, b):
         return {"tables": [{"title": "per joint", "by": "joint", "count": "joints",

@@ -81,8 +81,9 @@ def test_untracked_people_need_a_tracker_or_best(tmp_path):
     op = tmp_path / "op"
     write_openpose(op, "v", range(4), lambda f: [(-1, body25(f)),
                                                  (-1, body25(f, shift=9, low=["Nose"]))])
-    with pytest.raises(I.BadInput, match=r"v_000000000000_keypoints.json: people\[0\]: image "
-                                         r"holds 2 detections without track_id"):
+    with pytest.raises(I.BadInput, match=r"v_000000000000_keypoints.json: people\[0\]: 2 people "
+                                         r"without person_id in this frame; run OpenPose with "
+                                         r"--tracking 1"):
         I.import_openpose(op, tmp_path / "o.h5", image_size=(W, H), clip_length=4)
     assert not (tmp_path / "o.h5").exists()
     I.import_openpose(op, tmp_path / "o.h5", image_size=(W, H), clip_length=4, tracks="best")

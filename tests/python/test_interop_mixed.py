@@ -86,13 +86,16 @@ def test_val_and_test_read_every_source_in_order(files):
         len(ClipDataset(f, "val", "autoencoder")) for f in files.values())
 
 
-def test_config_and_bad_options(files):
-    dm = MixedDataModule.from_config(REPO / "experiments" / "mix" / "autoencoder.yaml",
-                                     files, batch_size=50, epoch_size=1000, seed=7)
+def test_config_and_bad_options(files, tmp_path):
+    # the report's table with these files' clip length (from_config checks it)
+    table = tmp_path / "autoencoder.yaml"
+    text = (REPO / "experiments" / "mix" / "autoencoder.yaml").read_text()
+    table.write_text(text.replace("clip_length: 30", "clip_length: 4"))
+    dm = MixedDataModule.from_config(table, files, batch_size=50, epoch_size=1000, seed=7)
     assert [s["share"] for s in dm.sources] == [0.1, 0.4, 0.5] and dm.task == "autoencoder"
     with pytest.raises(ValueError, match=r"no clip file given for sources \['amass'\]"):
-        MixedDataModule.from_config(REPO / "experiments" / "mix" / "autoencoder.yaml",
-                                    {"jaad": files["jaad"], "carla_bsp": files["carla_bsp"]})
+        MixedDataModule.from_config(table, {"jaad": files["jaad"],
+                                            "carla_bsp": files["carla_bsp"]})
     bad = [dict(name="a", h5_path="x", share=0.5), dict(name="b", h5_path="y", share=0.4)]
     with pytest.raises(ValueError, match="shares must add up to 1"):
         MixedDataModule(bad)
@@ -104,7 +107,7 @@ def test_config_and_bad_options(files):
 
 def test_lightning_fit_draws_the_shares_every_epoch(files):
     pl = pytest.importorskip("lightning.pytorch")
-    from bsp_fast.training.tasks import AutoencoderTask
+    from bsp_fast.training.module import AutoencoderTask
 
     dm = _dm(files, noise=2.0)
     dm.epoch_size, dm.batch_size = 60, 20

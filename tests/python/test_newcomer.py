@@ -412,12 +412,12 @@ def test_installed_layout_finds_the_tables_outside_the_source_tree(tmp_path):
     elsewhere = tmp_path / "somewhere" / "else"
     elsewhere.mkdir(parents=True)
     env = dict(os.environ, PYTHONPATH=str(site))  # _core: the installed one (extend_path)
-    code = ("from bsp_fast.training.reproduce import load_table, TABLES\n"
+    code = ("from bsp_fast.reproduction import load_table, TABLES\n"
             "for t in TABLES:\n    print(load_table(t)['path'])\n")
     r = subprocess.run([sys.executable, "-c", code], cwd=elsewhere, env=env,
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
-    from bsp_fast.training.reproduce import TABLES
+    from bsp_fast.reproduction import TABLES
 
     assert r.stdout.split() == [str(site / "bsp_fast" / "experiments" / f"{t}.yaml")
                                 for t in TABLES]
@@ -434,7 +434,7 @@ def test_installed_layout_finds_the_tables_outside_the_source_tree(tmp_path):
 
 
 def test_reproduce_reads_a_users_own_table_file(tmp_path, capsys):
-    from bsp_fast.training.reproduce import main
+    from bsp_fast.reproduction import main
 
     mine = tmp_path / "mine.yaml"
     text = (ROOT / "experiments" / "autoencoder.yaml").read_text()

@@ -14,7 +14,7 @@ import torch
 
 from bsp_fast.data.testing import write_clip_file
 from bsp_fast.training import config as C
-from bsp_fast.training import reproduce as R
+from bsp_fast import reproduction as R
 
 TABLES = R.TABLES
 
@@ -218,7 +218,7 @@ def test_smoke_run_prints_table_and_consistent_marks(table, data, tmp_path, caps
         assert cells[col] == R.format_value(tab, m, saved["results"][name]["metrics"][m])
         if saved["results"][name]["epochs"] is not None:  # the cost of the row's own model
             from bsp_fast.models.cost import parameter_count
-            from bsp_fast.training.tasks import load_module
+            from bsp_fast.training.module import load_module
 
             run = Path(saved["results"][name]["run"])
             net = load_module(run / "checkpoints" / "best.ckpt").net

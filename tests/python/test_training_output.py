@@ -2,6 +2,7 @@
 data is converted; in a log file or a pipe the progress is plain lines, not a bar redrawn
 with carriage returns; --quiet still prints the results table and the path written."""
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -39,18 +40,59 @@ def test_bad_model_option_is_refused_before_any_conversion(tmp_path, capsys):
     assert sorted(p.name for p in ds.iterdir()) == ["config.yaml", "data.csv"]  # no cache
 
 
-def test_progress_in_a_pipe_is_plain_lines(clips, tmp_path):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+def _env() -> dict:
+    return dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+
+
+@pytest.fixture(scope="module")
+def piped_run(clips, tmp_path_factory):
+    """bsp-train with its stdout and stderr in a pipe (not a terminal): (result, run)."""
+    run = tmp_path_factory.mktemp("piped") / "run"
     p = subprocess.run([sys.executable, "-m", "bsp_fast", "train", "classification", "lstm",
-                        "--data", str(clips), "--epochs", "3", "--out",
-                        str(tmp_path / "run")] + TINY,
-                       capture_output=True, text=True, env=env, timeout=300)
+                        "--data", str(clips), "--epochs", "3", "--out", str(run)] + TINY,
+                       capture_output=True, text=True, env=_env(), timeout=300)
     assert p.returncode == 0, p.stderr[-2000:]
+    return p, run
+
+
+def test_progress_in_a_pipe_is_plain_lines(piped_run):
+    p, _ = piped_run
     assert "\r" not in p.stderr and "\x1b[" not in p.stderr
     done = [ln for ln in p.stderr.splitlines() if " done: " in ln]
     assert [ln.split("] ")[1].split(" done")[0] for ln in done] == \
         ["epoch 1/3", "epoch 2/3", "epoch 3/3"]
     assert "val/loss" in done[-1] and len(p.stderr) < 5000
+
+
+def test_every_epoch_line_has_its_own_train_loss(piped_run):
+    """Issue 40 item 5: the first epoch's line had no train/loss (the module logs it after
+    the callbacks' epoch end) and each later line showed the epoch before's."""
+    import csv
+
+    p, run = piped_run
+    done = [ln for ln in p.stderr.splitlines() if " done: " in ln]
+    shown = [float(re.search(r"train/loss (\S+?)(,|$)", ln).group(1)) for ln in done]
+    with open(next(run.glob("logs/version_*/metrics.csv")), newline="") as fh:
+        logged = [float(r["train/loss"]) for r in csv.DictReader(fh) if r.get("train/loss")]
+    assert len(shown) == len(logged) == 3
+    assert shown == pytest.approx(logged, rel=1e-3)  # printed with 4 significant digits
+    assert all("val/loss" in ln for ln in done)
+
+
+def test_predict_in_a_pipe_has_no_lightning_bar(piped_run, tmp_path):
+    """Issue 40 item 7: bsp-predict off a terminal writes bsp-train's plain lines, not
+    Lightning's bar ("Predicting: | 0/?" redrawn with carriage returns)."""
+    _, run = piped_run
+    out = tmp_path / "preds.h5"
+    p = subprocess.run([sys.executable, "-m", "bsp_fast", "predict", str(run), "--out",
+                        str(out)], capture_output=True, text=True, env=_env(), timeout=300)
+    assert p.returncode == 0, p.stderr[-2000:]
+    both = p.stdout + p.stderr
+    assert "\r" not in both and "\x1b[" not in both and "Predicting" not in both
+    assert "it/s" not in both and "|" not in both
+    assert re.search(r"^\[ *\d+\.\d s\] predicting done: 1 batch\(es\)$", p.stderr, re.M), \
+        p.stderr
+    assert p.stdout.startswith(f"wrote {out}: 8 test clips") and out.is_file()
 
 
 def test_quiet_keeps_the_results_table_and_the_path(clips, tmp_path, capsys):

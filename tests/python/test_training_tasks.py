@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from bsp_fast.training import tasks as T
+from bsp_fast.training.module import TASK_MODULES
 from bsp_fast.training.curves import curves_figure, plot_curves
 from bsp_fast.training.tables import COLUMNS
 
@@ -40,7 +41,7 @@ def test_registry_owns_what_each_task_declares():
         keys = [m.key for m in task.metrics]
         assert set(task.curves) <= set(keys) and task.baseline == T.BASELINES[name]
         assert [c[2] for c in COLUMNS[name] if c[1] == "m"] == keys  # the tables ask it
-        assert T.TASK_MODULES[name].task == name
+        assert TASK_MODULES[name].task == name
     # only where inputs can be deformed do the tables show sigma and MJP
     assert [n for n, t in T.TASKS.items() if t.deformed_inputs] == ["classification",
                                                                     "autoencoder"]
@@ -51,7 +52,7 @@ def test_registry_owns_what_each_task_declares():
 def test_reproduce_findings_use_the_task_baselines(tmp_path):
     import yaml
 
-    from bsp_fast.training import reproduce as R
+    from bsp_fast import reproduction as R
 
     doc = yaml.safe_load((REPO / "experiments" / "lifting.yaml").read_text())
     doc["findings"][0]["baseline"] = "constant"  # a classification-only baseline

@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..atomic import DATASET_FILES, OutputOverlapError, check_outputs, refuse
+
 EXIT_CLEAN, EXIT_PROBLEMS, EXIT_USAGE = 0, 1, 2
 
 
@@ -21,7 +23,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "spread over threads.",
         epilog="Exit codes: 0 no errors (warnings alone, e.g. occluded rows, exit 0; "
                "--strict makes them 1), 1 errors found (or data.csv unreadable), 2 bad "
-               "arguments (missing dataset, --fix directory exists or overlaps the dataset). "
+               "arguments (missing dataset, --fix directory exists or overlaps the dataset, "
+               "--json or --fix is one of the dataset's files, or both are one path). "
                "Gaps in frame.idx and event-camera files are notes, not problems.")
     p.add_argument("dataset", metavar="DATASET",
                    help="dataset directory holding data.csv (or the data.csv itself)")
@@ -59,6 +62,10 @@ def main(argv=None) -> int:
         print("bsp-check: --link and --force only apply with --fix", file=sys.stderr)
         return EXIT_USAGE
     try:
+        _check_outputs(args)
+    except OutputOverlapError as e:
+        return refuse("bsp-check", e)
+    try:
         if args.fix:
             report = fix_dataset(args.dataset, args.fix, threads=args.threads,
                                  force=args.force, link=args.link, progress=not args.quiet)
@@ -78,6 +85,24 @@ def main(argv=None) -> int:
         text = text.rstrip("\n").rsplit("\n", 1)[-1] + "\n"
     sys.stdout.write(text)
     return exit_code(report, args.strict)
+
+
+def _check_outputs(args) -> None:
+    """The output rule (bsp_fast.atomic.check_outputs), before any file is read: --fix is
+    a separate copy (not the dataset, not inside it, not holding it); --json is none of
+    the dataset's files (data.csv, config.yaml, media); the two are not one path."""
+    from .core import dataset_paths
+    from .fix import check_fix_output
+
+    try:
+        root, csv = dataset_paths(args.dataset)
+    except FileNotFoundError:
+        return  # said by the check itself
+    if args.fix:
+        check_fix_output(root, args.fix)
+    check_outputs(inputs=[("the dataset's input", csv)],
+                  outputs=[("--json", args.json), ("--fix", args.fix)],
+                  read_dirs=[("the dataset", root, DATASET_FILES)])
 
 
 def exit_code(report: dict, strict: bool = False) -> int:

@@ -14,19 +14,23 @@ import shutil
 
 import numpy as np
 
-from ..atomic import atomic_output
+from ..atomic import atomic_output, check_outputs
 from .core import dataset_paths, run_check
 from .rows import MEDIA_SUFFIXES, event_camera_file
 
 LOG_NAME = "bsp-check-fix.tsv"
 
 
+def check_fix_output(root: str, out_dir) -> None:
+    """The output rule of ``--fix`` (:func:`bsp_fast.atomic.check_outputs`): the copy is
+    neither the dataset, nor inside it, nor a folder holding it (OutputOverlapError)."""
+    check_outputs(inputs=[("the dataset", root)], outputs=[("--fix", out_dir)],
+                  read_dirs=[("the dataset", root, None)])
+
+
 def _out_dir(root: str, out_dir, force: bool) -> str:
+    check_fix_output(root, out_dir)
     out = os.path.realpath(os.fspath(out_dir))
-    src = os.path.realpath(root)
-    if out == src or out.startswith(src + os.sep) or src.startswith(out + os.sep):
-        raise ValueError(f"--fix writes a separate copy: {out_dir} must be neither the dataset "
-                         "nor inside it (nor contain it)")
     if os.path.exists(out) and not force:
         raise FileExistsError(f"{out_dir} exists; pass force=True (--force) to replace it")
     return out

@@ -7,6 +7,7 @@ import threading
 import warnings
 
 from .._native import core as _core
+from ..atomic import OutputOverlapError, refuse
 from ..dask_cluster import SCHEDULER_HELP, run_on_scheduler
 from ..defaults import CONVERT, CROP_BOXES
 from .api import convert
@@ -133,6 +134,17 @@ def main(argv=None) -> int:
 
 
 def _main(args) -> int:
+    from pathlib import Path
+
+    from .inputs import dataset_csv, refuse_inputs_as_output
+
+    try:  # before a cluster is started (convert() checks again)
+        root, csv = dataset_csv(args.dataset)
+        refuse_inputs_as_output(root, csv, Path(args.output))
+    except OutputOverlapError as exc:
+        return refuse("bsp-convert", exc)
+    except FileNotFoundError:
+        pass  # convert() says so
     return run_on_scheduler(args.scheduler, "bsp-convert", lambda c: _convert_cli(args, c))
 
 
@@ -154,6 +166,8 @@ def _convert_cli(args, client) -> int:
                 crop_box=args.crop_box, crop_context=args.crop_context,
                 progress=False if args.quiet else None, strict=args.strict, client=client,
                 shards=args.shards)
+    except OutputOverlapError as exc:  # an output that is an input: exit 2
+        return refuse("bsp-convert", exc)
     except FileExistsError as exc:
         print(f"bsp-convert: {exc}", file=sys.stderr)
         return 3

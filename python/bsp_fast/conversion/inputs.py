@@ -4,9 +4,9 @@ dataset is untrusted input)."""
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
+from ..atomic import DATASET_FILES, check_outputs
 from .errors import BadDataset
 
 __all__ = ["dataset_csv", "dataset_fov", "refuse_inputs_as_output"]
@@ -54,15 +54,11 @@ def dataset_fov(root: Path):
 
 
 def refuse_inputs_as_output(root: Path, csv: Path, out: Path) -> None:
-    """ValueError when `out` is (or resolves, through symlinks, to) one of the dataset's
-    inputs: data.csv, config.yaml, or a media or CSV file inside the dataset directory."""
-    real = Path(os.path.realpath(out))
-    for inp in (csv, root / "config.yaml"):
-        if real == Path(os.path.realpath(inp)) or (
-                out.exists() and inp.exists() and os.path.samefile(out, inp)):
-            raise ValueError(f"output {out} is the dataset's input {inp}; refusing to "
-                             "overwrite it (choose another output path)")
-    inside = Path(os.path.realpath(root)) in real.parents
-    if inside and real.suffix.lower() in (".csv", ".mp4", ".apng", ".png", ".yaml"):
-        raise ValueError(f"output {out} would replace the dataset's {real.suffix} file "
-                         f"{real}; refusing to overwrite an input (choose another output path)")
+    """:class:`~bsp_fast.atomic.OutputOverlapError` (a ValueError) when `out` is (or
+    resolves, through symlinks, to) one of the dataset's inputs: data.csv, config.yaml, or
+    a media or CSV file inside the dataset directory (the rule of
+    :func:`bsp_fast.atomic.check_outputs`)."""
+    check_outputs(inputs=[("the dataset's input", csv),
+                          ("the dataset's input", root / "config.yaml")],
+                  outputs=[("output", out)],
+                  read_dirs=[("the dataset", root, DATASET_FILES)])

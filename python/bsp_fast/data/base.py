@@ -1,5 +1,5 @@
 """What the datasets of ``bsp_fast.data`` share: lazy HDF5 handles, batched reads, the
-PyTorch item protocol, seeds, ``transform`` hooks and the contiguous loader.
+PyTorch item protocol, per-clip random draws, ``transform`` hooks and the contiguous loader.
 
 A dataset subclass implements ``_arrays(pos, rows, rng)``, returning NumPy arrays of one
 batch; this base turns them into what each caller expects:
@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import os
 import weakref
-import zlib
 
 import numpy as np
 
@@ -26,6 +25,7 @@ from ..defaults import SEED
 torch = require("torch")
 import torch.utils.data  # noqa: E402
 
+from .clip_random import ClipRandom
 from .sampling import ContiguousBatchSampler, IndexBatch, collate_batch, derived_seed
 from . import transport
 from .transport import pack_batch
@@ -184,7 +184,7 @@ class SplitDataset(torch.utils.data.Dataset):
         if pos.min() < 0 or pos.max() >= len(self):
             raise IndexError(f"index out of range [0, {len(self)}) in {self!r}")
         rows = self._rows[pos]
-        rng = self._rng(pos, getattr(indices, "epoch", self.epoch))
+        rng = self._rng(rows, getattr(indices, "epoch", self.epoch))
         out, meta, strings, channels_last = self._arrays(pos, rows, rng)
         meta["index"], meta["row"] = pos, rows
         if channels_last and self.transform is not None:  # transforms see (.., 3, S, S)
@@ -208,12 +208,12 @@ class SplitDataset(torch.utils.data.Dataset):
         batch["meta"].update(strings)
         return batch
 
-    def _rng(self, pos: np.ndarray, epoch: int) -> np.random.Generator:
-        # SFC64: ~15% faster normals than the default PCG64, and noise is most of the work
+    def _rng(self, rows: np.ndarray, epoch: int) -> ClipRandom:
+        """The batch's random draws: one stream per clip keyed by (seed, split, epoch for
+        train / 0 for val and test, the clip's row), so neither the batch nor the worker
+        nor the rank that reads a clip changes what is drawn for it (see .clip_random)."""
         epoch = epoch if self.split == "train" else 0
-        key = zlib.crc32(pos.tobytes())
-        entropy = [self._seed, _SPLIT_CODE[self.split], epoch, key, len(pos)]
-        return np.random.Generator(np.random.SFC64(np.random.SeedSequence(entropy)))
+        return ClipRandom.for_rows(self._seed, _SPLIT_CODE[self.split], epoch, rows)
 
     # ----------------------------------------------------------------- loaders
     def loader(self, batch_size: int = 256, shuffle: bool | None = None, num_workers: int = 0,

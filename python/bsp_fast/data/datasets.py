@@ -256,14 +256,10 @@ class ClipDataset(SplitDataset):
         return out, channels_last
 
     def _noisy_crops(self, freader: Rows, rgb, box, rows, rng) -> tuple:
-        """``box_noise``: noisy boxes (train: from the batch's generator; val/test: one
-        generator per stored clip row) and their crops cut from the context crops."""
+        """``box_noise``: noisy boxes (per clip, from the clip's own stream like every draw)
+        and their crops cut from the context crops."""
         B, L = box.shape[:2]
-        if self.split == "train":
-            new = self.box_noise(box, rng)
-        else:
-            new = np.stack([self.box_noise(box[i], np.random.default_rng(
-                [self._seed, 0xB0C5, int(r)])) for i, r in enumerate(rows)])
+        new = self.box_noise(box, rng)
         moved = np.isfinite(box).all(-1) & (new != box).any(-1)
         if not moved.any():
             return rgb, box

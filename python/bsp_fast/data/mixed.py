@@ -32,7 +32,8 @@ except ImportError:  # pragma: no cover - depends on the environment
     except ImportError:
         _Base = object
 
-__all__ = ["MixedDataModule", "MixedDataset", "MixedBatchSampler", "quotas", "read_mix"]
+__all__ = ["MixedDataModule", "MixedDataset", "MixedBatchSampler", "quotas", "read_mix",
+           "mix_table", "mix_dirs"]
 
 MIX_TASKS = ("classification", "autoencoder")
 
@@ -162,6 +163,50 @@ class _Sequential:
         return -(-self.n // self.batch_size)
 
 
+def mix_dirs() -> list:
+    """Where mixing tables are looked up by name, in order: ``$BSP_EXPERIMENTS/mix``,
+    ``./experiments/mix``, the tables installed with the package
+    (``bsp_fast/experiments/mix``), the source tree's ``experiments/mix``."""
+    import os
+    from importlib import resources
+
+    dirs = [Path(d) / "mix" for d in os.environ.get("BSP_EXPERIMENTS", "").split(os.pathsep) if d]
+    dirs += [Path.cwd() / "experiments" / "mix",
+             Path(str(resources.files("bsp_fast").joinpath("experiments"))) / "mix",
+             Path(__file__).resolve().parents[3] / "experiments" / "mix"]
+    out = []
+    for d in dirs:
+        if d not in out:
+            out.append(d)
+    return out
+
+
+def mix_table(name_or_path) -> Path:
+    """A mixing table's file: a path to a YAML file as is, or a table name
+    (``"autoencoder"``) looked up as ``NAME.yaml`` in :func:`mix_dirs`."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml") or p.is_file():
+        if not p.is_file():
+            raise FileNotFoundError(f"mixing table {p} does not exist")
+        return p
+    found = [d / f"{p.name}.yaml" for d in mix_dirs() if (d / f"{p.name}.yaml").is_file()]
+    if not found:
+        names = sorted({f.stem for d in mix_dirs() if d.is_dir() for f in d.glob("*.yaml")})
+        raise FileNotFoundError(f"no mixing table {p.name!r} in {[str(d) for d in mix_dirs()]}"
+                                f"; tables found: {names or 'none'}")
+    return found[0]
+
+
+def _clip_length(h5_path) -> int:
+    from ..conversion.vds import open_clip_file
+
+    try:
+        with open_clip_file(h5_path) as f:
+            return int(f.attrs["clip_length"])
+    except (OSError, KeyError) as exc:
+        raise ValueError(f"{h5_path}: not a clip file with a clip_length ({exc})") from None
+
+
 def read_mix(path) -> dict:
     """A mixing table (YAML): ``task``, ``sources`` (``name``, ``share``, optional
     ``h5_path``), optional ``epoch_size``, ``clip_length``; checked."""
@@ -215,14 +260,27 @@ class MixedDataModule(_Base):
 
     @classmethod
     def from_config(cls, path, paths: dict, **overrides) -> "MixedDataModule":
-        """From a mixing table (``experiments/mix/*.yaml``); ``paths`` maps each source's
-        name to its clip file (the table names sources, not files)."""
+        """From a mixing table: a YAML path, or a table name (``"autoencoder"``: the
+        ``experiments/mix/autoencoder.yaml`` found by :func:`mix_table`); ``paths`` maps
+        each source's name to its clip file (the table names sources, not files). Every
+        file's clip length must be the table's ``clip_length`` (where it gives one) and
+        the same for all sources."""
+        path = mix_table(path)
         doc = read_mix(path)
         missing = [s["name"] for s in doc["sources"] if s.get("name") not in paths]
         if missing:
             raise ValueError(f"{path}: no clip file given for sources {missing} (paths=...)")
         sources = [dict(name=s["name"], share=s["share"], h5_path=str(paths[s["name"]]))
                    for s in doc["sources"]]
+        lengths = {s["name"]: _clip_length(s["h5_path"]) for s in sources}
+        want = doc.get("clip_length")
+        bad = {n: L for n, L in lengths.items() if want is not None and L != int(want)}
+        if bad:
+            raise ValueError(f"{path}: clip_length {want}, but " + ", ".join(
+                f"source {n!r} ({paths[n]}) has {L}" for n, L in bad.items())
+                + ": convert or import it with --clip-length " + str(want))
+        if len(set(lengths.values())) > 1:
+            raise ValueError(f"{path}: sources have different clip lengths {lengths}")
         options = {k: doc[k] for k in ("task", "epoch_size", "batch_size") if k in doc}
         options.update(overrides)
         return cls(sources, **options)

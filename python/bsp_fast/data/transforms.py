@@ -11,8 +11,9 @@ Conventions:
 
 * A **missing** joint is exactly ``(0, 0)`` in pixel space (SPEC section 5); transforms
   leave missing joints at ``(0, 0)`` and bounding boxes ignore them.
-* Random transforms take ``rng`` (a :class:`numpy.random.Generator`; a fresh unseeded one
-  when ``None``) and draw one decision per **clip**: the clip axes are all dimensions
+* Random transforms take ``rng`` (a :class:`numpy.random.Generator`, a fresh unseeded one
+  when ``None``; the datasets pass a :class:`~bsp_fast.data.clip_random.ClipRandom`, one
+  stream per clip of the batch) and draw one decision per **clip**: the clip axes are all dimensions
   before the last three, so ``(B, L, J, 2)`` gets B flips/angles and a single clip
   ``(L, J, 2)`` or frame ``(J, 2)`` gets one. Noise and missing joints are drawn per
   frame, joint (and axis).
@@ -70,7 +71,7 @@ def _normal(rng: np.random.Generator, shape) -> np.ndarray:
     numbers come from a torch generator seeded from ``rng`` (2.2x faster than NumPy's
     float32 ziggurat; noise is the largest cost of a deformed batch)."""
     torch = _torch()
-    if torch is None:
+    if torch is None or not isinstance(rng, np.random.Generator):  # e.g. ClipRandom
         return rng.standard_normal(shape, dtype=np.float32)
     g = torch.Generator().manual_seed(int(rng.integers(0, 2**63 - 1)))
     return torch.randn(tuple(shape), generator=g, dtype=torch.float32).numpy()

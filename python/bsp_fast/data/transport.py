@@ -106,6 +106,16 @@ def _unpack_batch(buffer, key, layout: dict, strings: dict) -> dict:
     return _copy_out(buffer.numpy(), layout, strings)
 
 
+def _place(batch: dict, name: str, t, order) -> None:
+    """Puts tensor ``t`` of packed entry ``name`` (permuted by ``order``) into ``batch``."""
+    if order is not None:
+        t = t.permute(*order)
+    if name.startswith("meta/"):
+        batch["meta"][name[5:]] = t
+    else:
+        batch[name] = t
+
+
 def _copy_out(raw: np.ndarray, layout: dict, strings: dict, release: bool = True) -> dict:
     """Copies a packed batch out of ``raw`` into fresh tensors, then frees the slot."""
     batch: dict = {"meta": dict(strings)}
@@ -113,12 +123,7 @@ def _copy_out(raw: np.ndarray, layout: dict, strings: dict, release: bool = True
         t = torch.empty(shape, dtype=getattr(torch, dtype))
         view = raw[offset:offset + nbytes].view(t.numpy().dtype).reshape(shape)
         np.copyto(t.numpy(), view)
-        if order is not None:
-            t = t.permute(*order)
-        if name.startswith("meta/"):
-            batch["meta"][name[5:]] = t
-        else:
-            batch[name] = t
+        _place(batch, name, t, order)
     if release:
         raw[0] = 0  # after the copies: the worker may refill the buffer
     return batch
@@ -268,13 +273,7 @@ def _unpack_arena(arena_id, k: int, layout: dict, strings: dict) -> dict:
         offset, nbytes, dtype, shape, order = layout[name]
         view = raw[offset:offset + nbytes].view(np.dtype(dtype)).reshape(shape)
         weakref.finalize(view, holds.drop)
-        t = torch.from_numpy(view)
-        if order is not None:
-            t = t.permute(*order)
-        if name.startswith("meta/"):
-            batch["meta"][name[5:]] = t
-        else:
-            batch[name] = t
+        _place(batch, name, torch.from_numpy(view), order)
     return batch
 
 

@@ -2,19 +2,26 @@
 other tools' formats, list the joint maps (docs/interop.md).
 
 Exit codes: 0 done, 1 bad input file (the message names file, record and reason), 2 bad
-option, 3 the output exists (pass --force).
+option or an output that is one of the inputs (or two outputs that are one file; refused
+with --force too), 3 the output exists (pass --force).
 """
 from __future__ import annotations
 
 import argparse
 import sys
 
+from ..atomic import OutputOverlapError, check_outputs, refuse
 from ..defaults import CONVERT
 from ..skeletons import JOINT_SETS, coverage_table
 from . import export_coco, export_videopose3d, import_coco, import_openpose
 from .clipfile import clip_settings
 from .exporters import FRAMES_3D, SPLIT_CHOICES
-from .readers import BadInput
+from .benchmark_annotations import BENCHMARK
+from .benchmark_annotations import stats_lines as benchmark_stats
+from .jaad import SUBSETS as JAAD_SUBSETS
+from .jaad import import_jaad
+from .pie import import_pie
+from .readers import BadInput, cli_wording
 
 __all__ = ["main", "build_parser"]
 
@@ -57,8 +64,10 @@ def _import_common(p) -> None:
     p.add_argument("--no-derive", action="store_true",
                    help="no mid-point derivations (COCO: hips and neck stay missing)")
     p.add_argument("--tracks", choices=("require", "best"), default="require",
-                   help="detections without a track id: require one per image (default) or "
-                        "keep the best-scoring detection of each image")
+                   help="people without a track id: require a track id wherever a frame "
+                        "holds several (default), or follow one person per video: the one "
+                        "nearest the previous frame's pose (a far jump starts a new track "
+                        "and is listed as an identity switch)")
     p.add_argument("--skip-short-tracks", action="store_true",
                    help="leave out tracks shorter than a clip (default: an error)")
     p.add_argument("--force", action="store_true", help="replace an existing OUT.h5")
@@ -85,15 +94,21 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("input", metavar="JSON_DIR")
     o.add_argument("--image-size", type=_size, metavar="WxH", required=True)
     _import_common(o)
+    _benchmark_parsers(imp)
     exp = sub.add_parser("export", help="clip file -> other formats").add_subparsers(
         dest="format", required=True)
-    v = exp.add_parser("videopose3d", help="VideoPose3D .npz (positions_2d, positions_3d)")
+    v = exp.add_parser("videopose3d", help="VideoPose3D data_2d_custom_NAME.npz "
+                       "(run.py -d custom -k NAME) and optionally the 3D joints")
     v.add_argument("input", metavar="CLIPS.h5")
-    v.add_argument("out", metavar="OUT_2D.npz")
-    v.add_argument("--out-3d", metavar="OUT_3D.npz", help="also the 3D joints (metres)")
+    v.add_argument("out", metavar="OUT_2D.npz", help="e.g. data_2d_custom_NAME.npz")
+    v.add_argument("--out-3d", metavar="OUT_3D.npz",
+                   help="also the H36M-17 3D joints (metres), e.g. data_3d_custom_NAME.npz; "
+                        "an error for a 2D-only (imported) file")
     v.add_argument("--frame", choices=FRAMES_3D, default="camera",
                    help="3D frame: camera (OpenCV axes), world, absolute (walker)")
-    v.add_argument("--joints", default="h36m17", help="joint set (default h36m17)")
+    v.add_argument("--joints", default="coco17",
+                   help="2D joint set (default coco17, what VideoPose3D's in-the-wild models "
+                        "take; h36m17)")
     e = exp.add_parser("coco", help="COCO keypoint annotations (or --results) JSON")
     e.add_argument("input", metavar="CLIPS.h5")
     e.add_argument("out", metavar="OUT.json")
@@ -101,28 +116,73 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a results list (detector output) instead of annotations")
     e.add_argument("--images", metavar="IMAGES.json", help="with --results: the images JSON")
     e.add_argument("--joints", default="coco17", help="joint set (default coco17)")
+    e.add_argument("--write-images", metavar="DIR",
+                   help="also write the frames as the JPEGs file_name names, below DIR "
+                        "(from the clip file's media crops)")
     for q in (v, e):
         q.add_argument("--split", choices=SPLIT_CHOICES, default="all")
         q.add_argument("--no-derive", action="store_true", help="no mid-point derivations")
         q.add_argument("--force", action="store_true", help="replace existing outputs")
+        q.add_argument("--quiet", action="store_true")
     j = sub.add_parser("joints", help="which CARLA joint each joint set fills (markdown)")
     j.add_argument("--no-derive", action="store_true")
     p.epilog = "joint sets: " + ", ".join(JOINT_SETS)
     return p
 
 
+def _check_outputs(a) -> None:
+    """The output rule (bsp_fast.atomic.check_outputs) for every sub-command, before any
+    file is read: no output is an input, no two outputs are one file."""
+    if a.command == "export":
+        outputs = [("output", a.out)]
+        if a.format == "videopose3d":
+            outputs.append(("--out-3d", a.out_3d))
+        else:
+            if a.results:
+                outputs.append(("--images", a.images))
+            outputs.append(("--write-images", a.write_images))
+        check_outputs(inputs=[("the input", a.input)], outputs=outputs)
+        return
+    if a.format in ("jaad", "pie"):  # annotations, split files, poses below the inputs
+        check_outputs(inputs=[("the dataset folder", a.input), ("--poses", a.poses),
+                              ("--split-dir", getattr(a, "split_dir", None))],
+                      outputs=[("output", a.out)],
+                      read_dirs=[("the dataset folder", a.input, ("*.xml", "*.txt")),
+                                 ("the --openpose folder", a.openpose, ("*_keypoints.json",)),
+                                 ("the --poses folder", a.poses, ("*.pkl",))])
+        return
+    inputs = [("the input", a.input), ("the --labels file", a.labels)]
+    read_dirs = []
+    if a.format == "coco":
+        inputs.append(("the --images file", a.images))
+    else:  # every *_keypoints.json below the folder is read
+        read_dirs.append(("the OpenPose folder", a.input, ("*_keypoints.json",)))
+    check_outputs(inputs=inputs, outputs=[("output", a.out)], read_dirs=read_dirs)
+
+
 def _run(a) -> str:
     if a.command == "joints":
         return coverage_table(derive=not a.no_derive)
+    _check_outputs(a)
     if a.command == "export":
         common = dict(joints=a.joints, split=a.split, derive=not a.no_derive, force=a.force)
         if a.format == "videopose3d":
             r = export_videopose3d(a.input, a.out, a.out_3d, frame_3d=a.frame, **common)
-            return f"wrote {a.out}" + (f" and {a.out_3d}" if a.out_3d else "") + \
-                f": {r['clips']} clips, {r['joints']} ({len(r['present'])} joints present)"
+            lines = [f"wrote {a.out}" + (f" and {a.out_3d}" if a.out_3d else "")
+                     + ": subjects (one per video/track run) "
+                     + ", ".join(f"{s} {n}" for s, n in r["subjects"].items())
+                     + f"; 2D layout {r['layout_name']!r}, {len(r['present'])} of "
+                     f"{r['num_joints']} joints from CARLA joints", f"joints approximated: {r['filled_joints'] or 'none'}; "
+                     f"joint positions interpolated over time: {r['interpolated']}"]
+            lines += [f"  left out {d}" for d in r["dropped"]]
+            return "\n".join(lines)
         r = export_coco(a.input, a.out, kind="results" if a.results else "annotations",
-                        images_out=a.images, **common)
-        return f"wrote {a.out}: {r['images']} images, {r['records']} records, {r['joints']}"
+                        images_out=a.images, images_dir=a.write_images, **common)
+        return (f"wrote {a.out}: {r['images']} images, {r['records']} records, {r['joints']}"
+                + (f"; {r['images_written']} JPEGs below {a.write_images}"
+                   if a.write_images else ""))
+    if a.format in ("jaad", "pie"):
+        return _run_benchmark(a)
     clips = dict(clip_length=a.clip_length, clip_offset=a.clip_offset,
                  eval_clip_offset=a.eval_clip_offset, min_video_length=a.min_video_length,
                  label=a.label, benchmark=a.benchmark, val_frac=a.val_frac,
@@ -135,18 +195,114 @@ def _run(a) -> str:
                         joints=a.joints, **common)
     else:
         r = import_openpose(a.input, a.out, image_size=a.image_size, **common)
-    lines = [f"wrote {r['output']}: {r['rows']} rows, {r['tracks']} tracks, clips "
-             + ", ".join(f"{s} {n} {r['class_counts'][s]}" for s, n in r["clips"].items()),
+    lines = [f"wrote {r['output']}: {r['rows']} rows, {r['tracks']} tracks; clips: "
+             + ", ".join(_split_counts(s, n, r["class_counts"][s])
+                         for s, n in r["clips"].items()),
              f"CARLA joints filled: {len(r['joints'])} of 26"]
     lines += [f"  skipped {s}" for s in r["skipped"]]
+    lines += _frame_lines(r.get("frames") or {})
     lines += [f"WARNING: {w}" for w in r["warnings"]]
     return "\n".join(lines)
+
+
+def _benchmark_parsers(imp) -> None:
+    """``import jaad`` and ``import pie``: official annotations + 2D poses, cut into the
+    PedestrianActionBenchmark's windows (bsp_fast.interop.jaad / .pie)."""
+    for name, what in (("jaad", "JAAD folder (annotations/, annotations_attributes/, "
+                                "split_ids/)"),
+                       ("pie", "PIE folder (annotations/SET/, annotations_attributes/SET/)")):
+        q = imp.add_parser(name, help=f"{name.upper()} annotations + OpenPose JSON or the "
+                           "benchmark's pose pickles (time-to-event windows)")
+        q.add_argument("input", metavar="ROOT", help=what)
+        q.add_argument("out", metavar="OUT.h5", help="clip file to write")
+        src = q.add_mutually_exclusive_group(required=True)
+        src.add_argument("--openpose", metavar="DIR", help="OpenPose --write_json output "
+                         "(every person; each track takes the one fitting its box)")
+        src.add_argument("--poses", metavar="PKL", help="the benchmark's pose_SET.pkl (a "
+                         "file or a folder of them; read with a restricted unpickler)")
+        if name == "jaad":
+            q.add_argument("--subset", choices=JAAD_SUBSETS, default="beh",
+                           help="beh: pedestrians with behaviour labels (default); all")
+            q.add_argument("--split-dir", metavar="DIR", help="folder with train/val/test.txt "
+                           "(default ROOT/split_ids/default; without one: a seeded split)")
+            q.add_argument("--seed", type=int, help="seeded split (no split files)")
+            q.add_argument("--val-frac", type=float)
+            q.add_argument("--test-frac", type=float)
+        q.add_argument("--obs-length", type=int, default=BENCHMARK["obs_length"])
+        q.add_argument("--tte", type=int, nargs=2, metavar=("MIN", "MAX"),
+                       default=list(BENCHMARK["tte"]), help="frames from a window's last "
+                       "frame to the event (default 30 60)")
+        q.add_argument("--overlap", type=float, default=BENCHMARK["overlap"][name],
+                       help=f"window overlap (default {BENCHMARK['overlap'][name]})")
+        q.add_argument("--threshold", type=float, default=0.3)
+        q.add_argument("--no-derive", action="store_true")
+        q.add_argument("--stats", action="store_true",
+                       help="print the share of missing joints over the imported windows")
+        q.add_argument("--force", action="store_true")
+        q.add_argument("--quiet", action="store_true")
+
+
+def _run_benchmark(a) -> str:
+    common = dict(openpose=a.openpose, poses=a.poses, threshold=a.threshold,
+                  derive=not a.no_derive, obs_length=a.obs_length, tte=tuple(a.tte),
+                  overlap=a.overlap, force=a.force)
+    if a.format == "jaad":
+        r = import_jaad(a.input, a.out, subset=a.subset, split_dir=a.split_dir, seed=a.seed,
+                        val_frac=a.val_frac, test_frac=a.test_frac, **common)
+    else:
+        r = import_pie(a.input, a.out, **common)
+    s = r["settings"]
+    lines = [f"wrote {r['output']}: {r['rows']} rows, {r['tracks']} pedestrians; windows: "
+             + ", ".join(_split_counts(k, n, r["class_counts"][k])
+                         for k, n in r["clips"].items()),
+             f"split: {r['split_note']}; windows of {s['obs_length']} frames, time to event "
+             f"{s['time_to_event'][0]}-{s['time_to_event'][1]}, every {s['stride']} frames "
+             f"(overlap {s['overlap']}); {r['short_tracks']} pedestrians too short left out"]
+    lines += [f"  skipped {x}" for x in r["skipped"]]
+    if a.stats:
+        lines += benchmark_stats(r)
+    return "\n".join(lines)
+
+
+def _frame_lines(notes: dict) -> list:
+    """The reader's notes on tracks and frames (readers.track_notes) as summary lines."""
+    if not notes:
+        return []
+    word = notes.get("frame_word", "frame")
+    empty, gaps = notes["empty_frames"], notes["dropped_frames"]
+    lines = [f"identity switches: {len(notes['identity_switches'])}; {word}s without a "
+             f"person: {sum(empty.values())}; missing {word} numbers: "
+             f"{sum(len(v) for v in gaps.values())}; other people not followed: "
+             f"{notes['dropped_detections']}"]
+    lines += [f"  identity switch: {s}" for s in notes["identity_switches"]]
+    lines += [f"  video {v!r}: {n} {word}(s) without a person" for v, n in empty.items()]
+    lines += [f"  video {v!r}: {word}s missing: " + _ranges(f) for v, f in gaps.items()]
+    return lines
+
+
+def _ranges(numbers) -> str:
+    out, start = [], None
+    for i, n in enumerate(numbers):
+        if start is None:
+            start = n
+        if i + 1 == len(numbers) or numbers[i + 1] != n + 1:
+            out.append(str(start) if start == n else f"{start}-{n}")
+            start = None
+    return ", ".join(out)
+
+
+def _split_counts(split: str, clips: int, counts) -> str:
+    """``train 32 clips (not-crossing 30, crossing 2)``."""
+    return f"{split} {clips} clips (not-crossing {counts[0]}, crossing {counts[1]})"
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        text = _run(args)
+        with cli_wording():
+            text = _run(args)
+    except OutputOverlapError as exc:
+        return refuse("bsp-interop", exc)
     except FileExistsError as exc:
         print(f"bsp-interop: {exc}", file=sys.stderr)
         return 3

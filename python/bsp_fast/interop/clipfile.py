@@ -19,7 +19,7 @@ from .._native import core as _core
 from ..atomic import atomic_output
 from ..conversion.api import clip_settings
 from ..skeletons import CARLA, skeleton_map
-from .readers import BadInput, Detections
+from .readers import BadInput, Detections, option
 
 __all__ = ["clip_settings", "write_clip_file"]  # clip_settings: the converter's own
 
@@ -90,8 +90,8 @@ def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3
     if short and not skip_short:
         raise BadInput(f"{det.source}: {len(short)} track(s) shorter than a clip: "
                        + "; ".join(skipped[:5]) + ("; ..." if len(skipped) > 5 else "")
-                       + "; pass skip_short (--skip-short-tracks) to leave them out; "
-                       "nothing written")
+                       + "; pass " + option("skip_short=True", "--skip-short-tracks")
+                       + " to leave them out; nothing written")
     if short:
         order = np.array([i for i in order if (vcode[i], tcode[i]) not in short], np.int64)
         if len(order) == 0:
@@ -133,6 +133,7 @@ def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3
                   clips_rejected_out_of_image=int(plan["clips_rejected_out_of_image"]),
                   joints_at_origin=int(at_origin.sum()),
                   joints=[n for n, p in zip(CARLA.joints, m.present) if p],
+                  frames=dict(det.notes),
                   settings=dict(st, source=det.source, source_joints=det.joints,
                                 threshold=float(threshold), derive=bool(derive),
                                 labels="csv" if labels is not None else "none"))

@@ -8,10 +8,12 @@ naming the file, the record and the reason.
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import csv
 import json
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
 import numpy as np
@@ -19,18 +21,38 @@ import numpy as np
 from ..skeletons import joint_set
 
 __all__ = ["BadInput", "Detections", "read_coco", "read_openpose", "read_labels",
-           "load_json"]
+           "load_json", "option", "cli_wording"]
 
 
 class BadInput(ValueError):
     """An input file cannot be imported as it is (the message names file, record, reason)."""
 
 
+_WORDING = contextvars.ContextVar("bsp_interop_wording", default="python")
+
+
+def option(python: str, cli: str) -> str:
+    """How a message names an option: the command line's spelling (``--skip-short-tracks``)
+    inside :func:`cli_wording` (``bsp-interop``), else the Python argument's."""
+    return cli if _WORDING.get() == "cli" else python
+
+
+@contextlib.contextmanager
+def cli_wording():
+    """Messages raised inside name options as ``bsp-interop`` spells them."""
+    token = _WORDING.set("cli")
+    try:
+        yield
+    finally:
+        _WORDING.reset(token)
+
+
 @dataclass
 class Detections:
     """Rows of 2D poses: ``points (N, J, 2)`` and ``scores (N, J)`` (float64) in the joint
     set ``joints``; ``video``, ``track`` (str lists), ``frame`` (int64), ``width``,
-    ``height`` (int64) and ``where`` (str list) per row."""
+    ``height`` (int64) and ``where`` (str list) per row. ``notes``: what the reader saw
+    about tracks and frames (:func:`track_notes`), for the summary."""
 
     joints: str
     video: list
@@ -42,6 +64,7 @@ class Detections:
     height: np.ndarray
     where: list
     source: str
+    notes: dict = field(default_factory=dict)
 
 
 def load_json(path):
@@ -107,8 +130,8 @@ def _image_table(doc, path: Path, default_size) -> dict:
         size = (im.get("width"), im.get("height"))
         if size[0] is None or size[1] is None:
             if default_size is None:
-                raise BadInput(f"{where} (id {im['id']!r}): no width/height; pass image_size "
-                               "(--image-size WxH)")
+                raise BadInput(f"{where} (id {im['id']!r}): no width/height; pass "
+                               + option("image_size=(W, H)", "--image-size WxH"))
             size = default_size
         if im["id"] in table:
             raise BadInput(f"{where}: image id {im['id']!r} appears twice")
@@ -128,7 +151,8 @@ def read_coco(path, images=None, image_size=None, tracks: str = "require",
     ``file_name``) and size; an annotations file carries its own. ``image_size`` (W, H)
     is used where an image has no width/height. ``tracks``: ``require`` (records without
     ``track_id`` are allowed only where an image holds one detection: track ``"0"``) or
-    ``best`` (without track ids, keep the highest-scoring detection of each image).
+    ``best`` (without track ids, follow one person per video: the one nearest the previous
+    frame's pose; see :func:`_assign_untracked`).
     ``joints``: the keypoints' joint set (COCO-17 unless the file follows another layout,
     e.g. ``body25`` from our exporter)."""
     if tracks not in ("require", "best"):
@@ -144,7 +168,8 @@ def read_coco(path, images=None, image_size=None, tracks: str = "require",
         records, annotations = doc, False
         if images is None:
             raise BadInput(f"{path}: a COCO results list names images by id only; pass the "
-                           "COCO-style JSON of those images (images=..., --images FILE)")
+                           "COCO-style JSON of those images ("
+                           + option("images=PATH", "--images IMAGES.json") + ")")
         table = _image_table(load_json(images), Path(images), size)
     else:
         raise BadInput(f"{path}: expected a COCO results list or a COCO annotations dict "
@@ -153,6 +178,7 @@ def read_coco(path, images=None, image_size=None, tracks: str = "require",
         raise BadInput(f"{path}: 'annotations' must be a list")
     jset = joint_set(joints)
     J = len(jset)
+    table_size = {(v, f): (w, h) for v, f, w, h in table.values()}
     rows = []
     for k, rec in enumerate(records):
         where = f"{path}: record {k}"
@@ -171,33 +197,106 @@ def read_coco(path, images=None, image_size=None, tracks: str = "require",
         except (ValueError, TypeError) as exc:
             raise BadInput(f"{where}: {exc}") from None
         conf = (kp[:, 2] > 0).astype(np.float64) if annotations else kp[:, 2]
-        track = rec.get("track_id")
+        track = rec.get("track_name", rec.get("track_id"))  # our exporter: both
         rows.append((rec["image_id"], None if track is None else str(track), kp[:, :2], conf,
                      score, f"{where} (image_id {rec['image_id']!r})"))
-    rows = _assign_untracked(rows, tracks, path)
-    out = [(*table[r[0]][:2], r[1], r[2], r[3], *table[r[0]][2:], r[5]) for r in rows]
-    return _detections(jset.name, out, str(path))
+    frames = {}
+    for video, frame, *_ in table.values():
+        frames.setdefault(video, set()).add(frame)
+    rows = [((*table[r[0]][:2],),) + r[1:] for r in rows]
+    rows, notes = _assign_untracked(rows, tracks, frames, _COCO_WORDS)
+    out = [(*r[0], r[1], r[2], r[3], *table_size[r[0]], r[5]) for r in rows]
+    return _detections(jset.name, out, str(path), notes)
 
 
-def _assign_untracked(rows: list, tracks: str, path: Path) -> list:
-    """Rows without a track id: track ``"0"`` where alone in their image, or the best."""
-    by_image: dict = {}
+_COCO_WORDS = dict(
+    image="image", id="track_id",
+    several="{n} detections without track_id in this image; run a tracker first (a "
+            "'track_id' per record), or follow one person per video ({best})")
+_OPENPOSE_WORDS = dict(
+    image="frame", id="person_id",
+    several="{n} people without person_id in this frame; run OpenPose with --tracking 1 "
+            "(a person_id per person), or follow one person per video ({best})")
+
+#: ``tracks='best'``: a kept pose farther than this (mean joint distance over the previous
+#: pose's box diagonal) from the previous one starts a new track (an identity switch)
+SWITCH_DISTANCE = 0.5
+
+
+def _box_of(points, conf) -> tuple:
+    seen = conf > 0
+    p = points[seen] if seen.any() else points
+    lo, hi = p.min(0), p.max(0)
+    return (lo + hi) / 2, max(float(np.hypot(*(hi - lo))), 1.0)
+
+
+def _distance(prev, cand) -> float:
+    """Mean distance of the joints seen in both poses (else of the box centres), over
+    the previous pose's box diagonal."""
+    (pp, pc), (cp, cc) = prev, cand
+    centre, diag = _box_of(pp, pc)
+    both = (pc > 0) & (cc > 0)
+    if both.any():
+        return float(np.linalg.norm(pp[both] - cp[both], axis=1).mean()) / diag
+    return float(np.linalg.norm(centre - _box_of(cp, cc)[0])) / diag
+
+
+def _assign_untracked(rows: list, tracks: str, frames: dict, words: dict) -> tuple:
+    """Rows ``((video, frame), track or None, points, conf, score, where)``. Rows without a
+    track id: track ``"0"`` where alone in their frame; several in one frame are an error
+    with ``tracks='require'``; ``tracks='best'`` follows one person per video: in the first
+    frame the best-scoring one, then in each frame the one nearest the previous kept pose
+    (:func:`_distance`); a nearest one farther than :data:`SWITCH_DISTANCE` is an identity
+    switch and starts the next track (``"1"``, ...). ``frames``: every frame each video
+    has (files or images, with people or not). Returns the kept rows and the notes
+    (:func:`track_notes`)."""
+    by_frame: dict = {}
     for r in rows:
         if r[1] is None:
-            by_image.setdefault(r[0], []).append(r)
-    keep = []
-    for r in rows:
-        if r[1] is not None:
-            keep.append(r)
-            continue
-        group = by_image[r[0]]
-        if len(group) > 1 and tracks == "require":
-            raise BadInput(f"{r[5]}: image holds {len(group)} detections without track_id; "
-                           "run a tracker first (a 'track_id' per record), or keep the "
-                           "best-scoring one per image (tracks='best', --tracks best)")
-        if r is max(group, key=lambda g: g[4]):
-            keep.append((r[0], "0") + r[2:])
-    return keep
+            by_frame.setdefault(r[0], []).append(r)
+    keep = [r for r in rows if r[1] is not None]
+    switches, dropped = [], 0
+    best = option("tracks='best'", "--tracks best")
+    for video in sorted({v for v, _ in by_frame}):
+        prev, track = None, 0
+        for frame in sorted(f for v, f in by_frame if v == video):
+            group = by_frame[(video, frame)]
+            if len(group) > 1 and tracks == "require":
+                raise BadInput(f"{group[0][5]}: " + words["several"].format(n=len(group),
+                                                                          best=best))
+            if prev is None or len(group) == 1 and tracks == "require":
+                pick = max(group, key=lambda g: g[4])
+                gap = None if prev is None else _distance(prev, (pick[2], pick[3]))
+            else:
+                gaps = [_distance(prev, (g[2], g[3])) for g in group]
+                pick = group[int(np.argmin(gaps))]
+                gap = min(gaps)
+            if tracks == "best" and gap is not None and gap > SWITCH_DISTANCE:
+                track += 1
+                switches.append(f"video {video!r} {words['image']} {frame}: the nearest "
+                                f"person is {gap:.2f} box diagonals from the previous one; "
+                                f"track {track - 1} ends, track {track} starts")
+            dropped += len(group) - 1
+            prev = (pick[2], pick[3])
+            keep.append((pick[0], str(track)) + pick[2:])
+    return keep, track_notes(rows, frames, switches, dropped, words)
+
+
+def track_notes(rows: list, frames: dict, switches: list, dropped: int, words: dict) -> dict:
+    """``identity_switches`` (lines), ``empty_frames`` (``{video: n}``: frames with no
+    person), ``dropped_frames`` (``{video: [frame, ...]}``: frame numbers missing between
+    a video's first and last frame), ``dropped_detections`` (people not followed)."""
+    with_people = {r[0] for r in rows}
+    empty, missing = {}, {}
+    for video, have in sorted(frames.items()):
+        n = sum((video, f) not in with_people for f in have)
+        if n:
+            empty[video] = n
+        gaps = sorted(set(range(min(have), max(have) + 1)) - set(have)) if have else []
+        if gaps:
+            missing[video] = gaps
+    return dict(identity_switches=switches, empty_frames=empty, dropped_frames=missing,
+                dropped_detections=int(dropped), frame_word=words["image"])
 
 
 _OPENPOSE_NAME = re.compile(r"^(?P<video>.+)_(?P<frame>\d+)_keypoints\.json$")
@@ -208,7 +307,8 @@ def read_openpose(folder, image_size, tracks: str = "require") -> Detections:
     ``folder`` (searched recursively), each ``{"people": [{"person_id": [id],
     "pose_keypoints_2d": [x, y, c] * 25}, ...]}`` (BODY_25). Tracks are the
     ``person_id`` (OpenPose's ``--tracking``); an untracked person (``-1``) is track
-    ``"0"`` when alone in the frame (or the best-scoring one with ``tracks='best'``).
+    ``"0"`` when alone in the frame (with ``tracks='best'``, the person nearest the
+    previous frame's pose: :func:`_assign_untracked`).
     ``image_size`` (W, H): OpenPose files do not record it."""
     if tracks not in ("require", "best"):
         raise ValueError(f"tracks must be 'require' or 'best', got {tracks!r}")
@@ -223,6 +323,7 @@ def read_openpose(folder, image_size, tracks: str = "require") -> Detections:
         raise BadInput(f"{folder}: no *_keypoints.json file in it")
     J = len(joint_set("body25"))
     rows = []
+    frames: dict = {}
     for path in files:
         m = _OPENPOSE_NAME.match(path.name)
         if m is None:
@@ -232,6 +333,7 @@ def read_openpose(folder, image_size, tracks: str = "require") -> Detections:
         if not isinstance(people, list):
             raise BadInput(f"{path}: no 'people' list")
         image = (m.group("video"), int(m.group("frame")))
+        frames.setdefault(image[0], set()).add(image[1])
         for k, person in enumerate(people):
             where = f"{path}: people[{k}]"
             try:
@@ -245,12 +347,12 @@ def read_openpose(folder, image_size, tracks: str = "require") -> Detections:
             pid = pid[0] if isinstance(pid, list) and pid else pid
             track = None if pid in (-1, None) else str(pid)
             rows.append((image, track, kp[:, :2], kp[:, 2], float(kp[:, 2].mean()), where))
-    rows = _assign_untracked(rows, tracks, folder)
+    rows, notes = _assign_untracked(rows, tracks, frames, _OPENPOSE_WORDS)
     out = [(r[0][0], r[0][1], r[1], r[2], r[3], size[0], size[1], r[5]) for r in rows]
-    return _detections("body25", out, str(folder))
+    return _detections("body25", out, str(folder), notes)
 
 
-def _detections(joints: str, rows: list, source: str) -> Detections:
+def _detections(joints: str, rows: list, source: str, notes=None) -> Detections:
     """Rows ``(video, frame, track, points, scores, W, H, where)``; duplicates refused."""
     seen = {}
     for r in rows:
@@ -267,7 +369,7 @@ def _detections(joints: str, rows: list, source: str) -> Detections:
         scores=np.array([r[4] for r in rows], np.float64).reshape(-1, J),
         width=np.array([r[5] for r in rows], np.int64),
         height=np.array([r[6] for r in rows], np.int64),
-        where=[r[7] for r in rows], source=source)
+        where=[r[7] for r in rows], source=source, notes=dict(notes or {}))
 
 
 LABEL_COLUMNS = ("video", "track", "frame", "crossing")

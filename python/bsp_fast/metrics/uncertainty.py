@@ -5,7 +5,7 @@ Every metric of the tasks is a ratio of global sums, ``value = sum(num) / sum(de
 (errors / joints, correct / joints, 2TP / (2TP + FP + FN) ...). A test split's clips come
 from a few recordings and overlap (sliding windows), so the units that may be resampled
 are the recordings: ``num`` and ``den`` are kept per recording
-(:mod:`bsp_fast.training.breakdown`) and the bootstrap (``scipy.stats.bootstrap``,
+(:mod:`bsp_fast.training.per_recording`) and the bootstrap (``scipy.stats.bootstrap``,
 percentile intervals) resamples recordings with all their clips. Two or more rows scored
 on the same recordings are resampled *jointly* (``paired=True``): the interval of a
 difference then reflects only how the rows differ recording by recording.
@@ -122,8 +122,9 @@ def grouped_interval(groups: list, fn, *, empty=float("nan"),
     independently between groups (``scipy.stats.bootstrap`` with ``paired=False`` over
     each group's recording indices). ``fn`` gets the row values in group order; ``empty``
     one value or one per row in that order. ``n`` is the smallest group's count."""
-    from scipy.stats import bootstrap
+    from .._extras import require
 
+    bootstrap = require("scipy.stats", "bootstrap intervals (bsp-reproduce)").bootstrap
     _check(confidence, n_resamples)
     groups = [[tuple(np.asarray(a, dtype=np.float64) for a in nd) for nd in g] for g in groups]
     sizes = []

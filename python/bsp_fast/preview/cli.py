@@ -32,7 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "by side: left blue, right orange, centre green.",
         epilog="Exit codes: 0 written, 1 unreadable input (media, HDF5) or the 'preview' "
                "extra (OpenCV, matplotlib) not installed, 2 bad arguments "
-               "(unknown recording or clip, OUT exists without --force, wrong extension). "
+               "(unknown recording or clip, OUT exists without --force, wrong extension, OUT "
+               "is one of the inputs, --force or not). "
                "Details: docs/preview.md.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -140,6 +141,27 @@ def _run(args) -> dict:
                                fps=args.fps, force=args.force, clips_h5=args.clips_h5)
 
 
+def _check_outputs(args) -> None:
+    """The output rule (bsp_fast.atomic.check_outputs), before any file is read: OUT is
+    none of the command's inputs (for ``frames``: data.csv, config.yaml or a media file
+    of the dataset)."""
+    from pathlib import Path
+
+    from ..atomic import DATASET_FILES, check_outputs
+
+    read_dirs = []
+    if args.command == "frames":
+        p = Path(args.dataset)
+        root, csv = (p, p / "data.csv") if p.is_dir() else (p.parent, p)
+        inputs = [("the dataset", root), ("the dataset's input", csv)]
+        read_dirs.append(("the dataset", root, DATASET_FILES))
+    elif args.command == "predictions":
+        inputs = [("the input", args.preds_h5), ("the --clips-h5 file", args.clips_h5)]
+    else:
+        inputs = [("the input", args.clips_h5)]
+    check_outputs(inputs=inputs, outputs=[("--out", args.out)], read_dirs=read_dirs)
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     try:
@@ -147,7 +169,12 @@ def main(argv=None) -> int:
     except SystemExit as e:
         return EXIT_USAGE if e.code else EXIT_OK
     from .. import Error
+    from ..atomic import OutputOverlapError, refuse
 
+    try:
+        _check_outputs(args)
+    except OutputOverlapError as e:
+        return refuse("bsp-preview", e)
     try:
         res = _run(args)
     except ImportError as e:  # an optional dependency: the message names the extra

@@ -153,8 +153,8 @@ def preview_frames(dataset, recording, out=None, *, frames=None, layout: str = "
     info = {"recording": rid, "frame_idx": [int(f) for f in sel]}
     if out is None:
         return dict(info, images=list(pictures()), path=None, format=None, frames=len(sel))
-    if fmt == "png":
-        result = save(out, [draw.grid(list(pictures()), cols)])
+    if fmt == "png":  # one picture that shows every selected frame
+        result = dict(save(out, [draw.grid(list(pictures()), cols)]), frames=len(sel))
     else:
         result = save(out, pictures(), fps=fps or 30.0)
     return dict(result, **info)

@@ -23,7 +23,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "clips/<id>-1.apng segmentation, config.yaml) without a simulator: a "
                     "procedural street, one walking pedestrian per clip, a static camera "
                     "placed as the original recorder did.",
-        epilog="Exit codes: 0 success, 1 generation error, 2 bad option or config, 3 OUT_DIR "
+        epilog="Exit codes: 0 success, 1 generation error, 2 bad option or config (or "
+               "OUT_DIR is or holds the --config or --motion file, --force or not), 3 OUT_DIR "
                "exists (use --force), 130 interrupted.")
     p.add_argument("out_dir", metavar="OUT_DIR", help="output directory (must not exist "
                    "unless --force); built as .OUT_DIR.tmp-* and renamed when complete")
@@ -93,7 +94,15 @@ def _print_summary(s: dict) -> None:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    from ..atomic import OutputOverlapError, check_outputs, refuse
     from ..dask_cluster import run_on_scheduler
+
+    try:  # before any work: OUT_DIR (replaced whole with --force) holds no input
+        check_outputs(inputs=[("the --config file", args.config),
+                              ("the --motion file", args.motion)],
+                      outputs=[("OUT_DIR", args.out_dir)])
+    except OutputOverlapError as e:
+        return refuse("bsp-synth", e)
 
     return run_on_scheduler(args.scheduler, "bsp-synth", lambda c: _generate(args, c))
 

@@ -12,6 +12,7 @@ import concurrent.futures as cf
 import multiprocessing
 import os
 import shutil
+import sys
 import time
 
 from ..atomic import atomic_output
@@ -188,14 +189,24 @@ def _dask_clip_job(cfg: SynthConfig, index: int, root: str) -> dict:
     return _clip_job(cfg, index, root, 1)
 
 
-def _run_clips(cfg: SynthConfig, root: str, workers: int, progress: bool, client=None) -> list:
-    """Runs every clip and appends its rows to data.csv in clip order as they complete."""
+def _progress_bar(n: int, progress: bool):
+    """tqdm's bar on a terminal; off one (a log file, CI) plain lines in bsp-train's style,
+    no carriage returns (``bsp_fast._plain_progress``)."""
+    from .._plain_progress import PlainLines, is_terminal
+
+    if progress and not is_terminal(sys.stderr):
+        return PlainLines(n, "clips")
     from tqdm.auto import tqdm
 
+    return tqdm(total=n, desc="clips", unit="clip", disable=not progress)
+
+
+def _run_clips(cfg: SynthConfig, root: str, workers: int, progress: bool, client=None) -> list:
+    """Runs every clip and appends its rows to data.csv in clip order as they complete."""
     n = cfg.number_of_clips
     done: dict = {}
     stats = []
-    bar = tqdm(total=n, desc="clips", unit="clip", disable=not progress)
+    bar = _progress_bar(n, progress)
     with open(os.path.join(root, "data.csv"), "wb") as out:
         def flush():
             while len(stats) in done:

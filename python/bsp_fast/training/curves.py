@@ -23,7 +23,9 @@ def _version(path: Path) -> int:
 
 def read_logs(run_dir) -> dict:
     """Per-epoch values of every logged column, over all ``logs/version_*/metrics.csv``
-    (a resumed run adds a version): ``{column: {epoch: last value logged in that epoch}}``."""
+    (a resumed run adds a version): ``{column: {epoch: last value logged in that epoch}}``;
+    ``step`` holds the optimiser-update index of each epoch's validation row (Lightning
+    logs epoch-end values at the index of the epoch's last update)."""
     files = sorted(Path(run_dir).glob("logs/version_*/metrics.csv"), key=_version)
     out: dict = {}
     for f in files:
@@ -33,6 +35,9 @@ def read_logs(run_dir) -> dict:
                     epoch = int(float(row.get("epoch") or "nan"))
                 except ValueError:
                     continue
+                if any(k.startswith("val/") and t not in (None, "") for k, t in row.items()) \
+                        and row.get("step") not in (None, ""):
+                    out.setdefault("step", {})[epoch] = int(float(row["step"]))
                 for key, text in row.items():
                     if key in ("epoch", "step") or text in (None, ""):
                         continue

@@ -13,7 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import config as C
-from .runs import RunError, read_run, resolve_checkpoint, write_json
+from ..atomic import OutputOverlapError, refuse
+from .runs import RunError, check_run_outputs, read_run, resolve_checkpoint, run_inputs, \
+    write_json
 
 __all__ = ["evaluate", "breakdown", "main", "EvalResult", "load_run", "prepare_scoring"]
 
@@ -30,13 +32,17 @@ class EvalResult:
     metrics: dict
     checkpoint: Path
     config: dict
+    clips: int = 0
+    recordings: int = 0
 
 
 def load_run(run, which: str = "best", data=None, **overrides):
     """``(module, cfg, ckpt, h5)`` of a run directory or checkpoint: the rebuilt module, its
     saved config with ``overrides`` (bsp-train option names) applied, and the data to read
-    (``data``, else the HDF5 file the run used if it still exists, else its ``data``)."""
-    from .tasks import checkpoint_info, load_module
+    (``data``, else the run's dataset folder if it still exists, so its conversion is
+    compared with its data.csv, else the HDF5 file the run used if it still exists, else
+    its ``data``)."""
+    from .module import checkpoint_info, load_module
 
     if which not in ("best", "last"):
         raise ValueError(f"which must be one of ['best', 'last'], got {which!r}")
@@ -62,8 +68,14 @@ def load_run(run, which: str = "best", data=None, **overrides):
         import yaml
 
         doc = yaml.safe_load((run_dir / "config.yaml").read_text(encoding="utf-8")) or {}
-        used = (doc.get("resolved") or {}).get("h5")
-        if used and Path(used).is_file():
+        resolved = doc.get("resolved") or {}
+        used, folder = resolved.get("h5"), resolved.get("data")
+        if isinstance(folder, str) and (Path(folder).is_dir() or (
+                Path(folder).name == "data.csv" and Path(folder).is_file())):
+            # the run's dataset (absolute path): its conversion (the run's file in the
+            # cache) is checked against its data.csv, converted again when out of date
+            cfg["data"] = folder
+        elif used and Path(used).is_file():
             h5 = used
     if cfg.get("data") is None and h5 is None:
         raise RunError(f"{ckpt}: the checkpoint names no data; pass --data")
@@ -96,9 +108,11 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
              limit_batches: int | None = None, quiet: bool = True,
              box_noise=None, callbacks=()) -> EvalResult:
     """Scores the ``which`` checkpoint (best or last) of run directory or checkpoint
-    ``run`` on ``split`` (test or val) with the run's data settings (same batch size, so
-    the same fixed evaluation noise), any of them overridable; reproduces the run's
-    ``metrics.json``. ``box_noise=(scale, shift)`` (pose_estimation) scores the crops of
+    ``run`` on ``split`` (test or val) with the run's data settings (the evaluation noise
+    is fixed per clip), any of them overridable; reproduces the run's
+    ``metrics.json``. Every clip of the split is scored whatever ``batch_size`` (the run's
+    ``limit_batches`` is not carried over; ``limit_batches`` here limits on purpose), and
+    the result counts the clips and recordings scored. ``box_noise=(scale, shift)`` (pose_estimation) scores the crops of
     noisy boxes instead: side x U[1 - scale, 1 + scale], centre moved by U[-shift, shift]
     x side per axis, fixed per clip by the evaluation seed (docs/data.md, "Box noise").
     ``callbacks``: more Lightning callbacks for the evaluation Trainer."""
@@ -108,7 +122,8 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
 
     module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size, workers=workers,
                                      accelerator=accelerator, noise=noise, mjp=mjp,
-                                     limit_batches=limit_batches, quiet=quiet)
+                                     quiet=quiet)
+    cfg["limit_batches"] = limit_batches or 0  # the whole split unless asked here
     precision = prepare_scoring(cfg, module)
     dm = make_datamodule(cfg, h5)
     if box_noise is not None:
@@ -117,14 +132,44 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
                              f"{module.task} run")
         dm.dataset_options["box_noise"] = tuple(float(x) for x in box_noise)
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
-    trainer = make_trainer(cfg, None, precision, fit=False, callbacks=callbacks)
+    counter = scored_clips_callback()
+    trainer = make_trainer(cfg, None, precision, fit=False,
+                           callbacks=[counter, *callbacks])
     if split == "test":
         trainer.test(module, datamodule=dm, verbose=False)
     else:
         trainer.validate(module, datamodule=dm, verbose=False)
     metrics = dict(module.results.get(split, {}))
     return EvalResult(task=module.task, model=module.hparams["model"], split=split,
-                      metrics=metrics, checkpoint=Path(ckpt), config=cfg)
+                      metrics=metrics, checkpoint=Path(ckpt), config=cfg,
+                      clips=counter.clips, recordings=len(counter.recordings))
+
+
+def scored_clips_callback():
+    """A Lightning callback counting the clips and recordings (``video_id/pedestrian_id``)
+    that validation or test batches carried, so a command can say what it scored."""
+    import lightning.pytorch as pl
+
+    from .per_recording import recording_ids
+
+    class _ScoredClips(pl.Callback):
+        def __init__(self):
+            self.clips, self.recordings = 0, set()
+
+        def _count(self, batch) -> None:
+            meta = batch["meta"]
+            self.clips += len(meta["index"])
+            self.recordings.update(recording_ids(meta))
+
+        def on_test_batch_end(self, trainer, module, outputs, batch, batch_idx,
+                              dataloader_idx=0):
+            self._count(batch)
+
+        def on_validation_batch_end(self, trainer, module, outputs, batch, batch_idx,
+                                    dataloader_idx=0):
+            self._count(batch)
+
+    return _ScoredClips()
 
 
 def breakdown(run, data=None, *, which: str = "best", save: bool = False, **options) -> dict:
@@ -190,10 +235,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--which", default="best", choices=("best", "last"),
                    help="checkpoint of a run directory")
     p.add_argument("--data", default=None, metavar="DATASET_OR_H5",
-                   help="data to evaluate on (default: the run's HDF5 file or dataset)")
+                   help="data to evaluate on (default: the run's dataset folder, else its "
+                        "HDF5 file)")
     p.add_argument("--batch-size", type=int, default=None,
-                   help="clips per batch (default: the run's; the fixed evaluation noise "
-                        "depends on it)")
+                   help="clips per batch (default: the run's; the scores do not depend "
+                        "on it: every clip's evaluation noise is fixed per clip)")
     p.add_argument("--workers", type=int, default=None, help="DataLoader worker processes")
     p.add_argument("--accelerator", default=None, choices=C.ACCELERATORS,
                    help="where to run (default: the run's)")
@@ -202,7 +248,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--mjp", default=None, metavar="P[,P...]",
                    help="override the run's missing-joint probability (1 or 26 values)")
     p.add_argument("--limit-batches", type=int, default=None, metavar="N",
-                   help="evaluate at most N batches (default: the run's setting)")
+                   help="evaluate at most N batches (default: the whole split, whatever "
+                        "the run trained with)")
     p.add_argument("--box-noise", default=None, metavar="SCALE,SHIFT", type=_box_noise,
                    help="pose_estimation: score crops of noisy boxes, side x U[1-SCALE, "
                         "1+SCALE] and centre moved by U[-SHIFT, SHIFT] x side (e.g. 0.1,0.05), "
@@ -229,6 +276,7 @@ def main(argv=None) -> int:
             raise C.ConfigError("--format json applies to --breakdown only")
         if args.save and not args.breakdown:
             raise C.ConfigError("--save writes the breakdown: add --breakdown")
+        _check_outputs(args)
         if args.breakdown:
             return _print_breakdown(args)
         res = evaluate(args.runs[0], args.split, args.data, which=args.which,
@@ -236,6 +284,8 @@ def main(argv=None) -> int:
                        accelerator=args.accelerator, noise=args.noise, mjp=args.mjp,
                        limit_batches=args.limit_batches, quiet=args.quiet,
                        box_noise=args.box_noise)
+    except OutputOverlapError as exc:  # --json is an input, --force or not
+        return refuse("bsp-eval", exc)
     except (C.ConfigError, ValueError) as exc:
         print(f"bsp-eval: {exc}", file=sys.stderr)
         return 2
@@ -247,9 +297,28 @@ def main(argv=None) -> int:
     if args.json:
         write_json(doc, args.json)
     print(f"{res.task} / {res.model}: {res.split} metrics of {res.checkpoint}")
+    print(f"  scored {res.clips} clips of {res.recordings} recordings"
+          + (f" (--limit-batches {args.limit_batches})" if args.limit_batches else ""))
     for key, value in res.metrics.items():
         print(f"  {key:14s} {value:.6g}")
     return 0
+
+
+def _check_outputs(args) -> None:
+    """The output rule (bsp_fast.atomic.check_outputs), before the run is loaded: --json
+    (and, with --breakdown --save, RUN/test_breakdown.json) is none of the run's inputs
+    (the run directory, its checkpoint and config.yaml, the data), nor each other."""
+    from .eval_breakdown import FILE
+
+    outputs = [("--json", args.json)]
+    if args.breakdown and args.save:
+        try:
+            run_dir = resolve_checkpoint(args.runs[0], args.which)[1]
+        except RunError:
+            run_dir = None  # said when the run is loaded
+        if run_dir is not None:
+            outputs.append(("--save", Path(run_dir) / FILE))
+    check_run_outputs(run_inputs(args.runs[0], args.which, args.data), outputs)
 
 
 def _print_breakdown(args) -> int:

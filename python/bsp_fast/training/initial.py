@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import torch
 
-from .breakdown import RecordingBreakdown
+from .per_recording import RecordingBreakdown
 from .scoring import TaskMetrics
 from .tasks import get_task
 
@@ -19,7 +19,7 @@ def initial_metrics(task: str, train_loader, eval_loaders: dict, limit: int = 0,
     like a trained model on each of ``eval_loaders`` (``{split: loader}``):
     ``{"baseline": name, split: {metric: value}}``. ``limit`` > 0 caps the batches read.
     ``model`` (the model about to be trained) gets ``init_from_baseline(baseline)``.
-    ``per_recording`` adds ``"test_per_recording"`` (:mod:`.breakdown`) for the test split."""
+    ``per_recording`` adds ``"test_per_recording"`` (:mod:`.per_recording`) for the test split."""
     import itertools
 
     from .. import models

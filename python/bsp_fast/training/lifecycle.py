@@ -5,7 +5,8 @@
   :class:`AtomicCheckpointIO`: written under a temporary name and renamed, so a full disk
   or a kill leaves the previous checkpoint whole.
 * SIGINT and SIGTERM during training finish the current batch, save ``last.ckpt`` and stop
-  with :class:`Interrupted`; ``bsp-train`` then leaves the run as an *incomplete* run
+  with :class:`Interrupted` (in an epoch's last batch or its validation: after the
+  validation and the end-of-epoch ``last.ckpt``); ``bsp-train`` then leaves the run as an *incomplete* run
   directory (``incomplete.json`` holds the epoch and step reached, there is no
   ``metrics.json``) and exits 130 or 143. Outside training (data conversion, testing) the
   same signals stop at once.
@@ -19,6 +20,7 @@ import contextlib
 import io
 import random
 import signal
+import sys
 import time
 from pathlib import Path
 
@@ -32,7 +34,7 @@ from .config import parse_duration  # re-exported: the option's parser
 from .runs import write_marker
 
 __all__ = ["Interrupted", "OutputWriteError", "CheckpointWriteError", "AtomicCheckpointIO",
-           "Lifecycle", "signals", "parse_duration"]
+           "Lifecycle", "signals", "parse_duration", "epochs_note", "test_checkpoint"]
 
 _EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}
 
@@ -154,6 +156,7 @@ class Lifecycle(Callback):
         self._last_save = time.monotonic()
         self._resume_rng = None
         self._skip = None
+        self.trained = False
 
     @property
     def state_key(self) -> str:
@@ -192,6 +195,7 @@ class Lifecycle(Callback):
                 loss._update_count = 1 if float(v.sum()) else 0
 
     def on_train_start(self, trainer, pl_module) -> None:
+        self.trained = True  # fit did not return at once (its epochs were already done)
         sampler = getattr(trainer.train_dataloader, "sampler", None)
         total = trainer.num_training_batches
         mid_epoch = self._skip is not None and 0 < self._skip[1] < total
@@ -215,11 +219,16 @@ class Lifecycle(Callback):
         self.epoch, self.batches_done = trainer.current_epoch, batch_idx + 1
         self.step = trainer.global_step
         stop = self.sig.received
+        # never a checkpoint after an epoch's last batch: Lightning resumes one as a finished
+        # epoch and skips its validation (a run stopped in epoch 1 then had no best.ckpt).
+        # A signal there stops after the epoch's validation and end-of-epoch checkpoint, as
+        # one during validation does (on_train_epoch_start, or bsp-train after fit)
+        last = self.batches_done >= trainer.num_training_batches
         due = bool(self.every) and time.monotonic() - self._last_save >= self.every \
-            and self.batches_done < trainer.num_training_batches
+            and not last
         if trainer.world_size > 1:  # every process saves (a collective) or none: rank 0 decides
             stop, due = trainer.strategy.broadcast((stop, due), src=0)
-        if stop is not None:
+        if stop is not None and not last:
             self.save(trainer, state="interrupted", signal=signal.Signals(stop).name)
             raise Interrupted(stop)
         if due:
@@ -236,8 +245,17 @@ class Lifecycle(Callback):
             raise Interrupted(stop)
 
     def on_train_epoch_end(self, trainer, pl_module) -> None:
-        # after validation and RunCheckpoint's best.ckpt: the state a next epoch starts from
-        # (Lightning's save_last writes last.ckpt only when best.ckpt changes)
+        # Lightning calls this before the monitoring callbacks' hook, where RunCheckpoint
+        # writes best.ckpt and EarlyStopping counts: RunCheckpoint calls epoch_end after its
+        # own, so last.ckpt holds this epoch's best score (a run resumed from it tests the
+        # right best.ckpt, and never replaces it with a worse one). A callback that says so
+        # (``calls_epoch_end``) calls it; no import of it here, it imports nothing of ours
+        if not any(getattr(c, "calls_epoch_end", False) for c in trainer.callbacks):
+            self.epoch_end(trainer)
+
+    def epoch_end(self, trainer) -> None:
+        """Saves the state a next epoch starts from (after validation, best.ckpt and early
+        stopping; Lightning's save_last writes last.ckpt only when best.ckpt changes)."""
         self.save(trainer, state="running")
 
     def on_train_end(self, trainer, pl_module) -> None:
@@ -257,3 +275,46 @@ class Lifecycle(Callback):
         write_marker(self.run_dir, **self.marker, epoch=self.epoch + 1, step=self.step,
                      batches_done=self.batches_done, checkpoint="checkpoints/last.ckpt",
                      **fields)
+
+
+# ---------------------------------------------------------------------- the end of a resumed run
+def epochs_note(cfg: dict, trainer, trained: bool) -> dict:
+    """A resumed run whose ``--epochs`` were already done: fit returned at once. Says so;
+    with ``--epochs`` below the epochs already completed, the run keeps those (it cannot
+    shed them): its ``epochs`` becomes that count, in config.yaml and metrics.json."""
+    done = int(trainer.current_epoch)
+    if trained or done < cfg["epochs"] or (cfg.get("max_steps") and
+                                          trainer.global_step >= cfg["max_steps"]):
+        return cfg
+    if done > cfg["epochs"]:
+        print(f"bsp-train: note: --epochs {cfg['epochs']} is below the {done} epochs this "
+              f"run had already completed: no more training, it ends with {done} epochs",
+              file=sys.stderr)
+        return dict(cfg, epochs=done)
+    print(f"bsp-train: note: the run had already completed its {done} epoch"
+          f"{'s' if done != 1 else ''}: no more training", file=sys.stderr)
+    return cfg
+
+
+def test_checkpoint(trainer, module, dm, tmp: Path) -> str:
+    """Tests the run's best checkpoint -> ``"best"``. When no validation ever ran, so there
+    is none (the run stopped before the end of its first epoch: ``--max-steps``, or resumed
+    from a checkpoint taken after the last batch of its first epoch, which Lightning
+    continues as a finished epoch), validates (for metrics.json's ``val``; not logged as an
+    epoch) and tests ``last.ckpt`` -> ``"last"``. Every process decides the same."""
+    best = trainer.checkpoint_callback
+    if best is not None and best.best_model_path:
+        trainer.test(module, datamodule=dm, ckpt_path="best", verbose=False)
+        return "best"
+    last = tmp / "checkpoints" / "last.ckpt"
+    if not last.is_file():
+        trainer.save_checkpoint(last)
+    loggers = trainer.loggers
+    trainer.loggers = []
+    try:
+        trainer.validate(module, datamodule=dm, ckpt_path=str(last), verbose=False,
+                         weights_only=True)
+    finally:
+        trainer.loggers = loggers
+    trainer.test(module, datamodule=dm, ckpt_path=str(last), verbose=False, weights_only=True)
+    return "last"

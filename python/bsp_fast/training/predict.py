@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from . import config as C
-from ..atomic import atomic_output
-from .runs import RunError, refuse_unsafe_output
+from ..atomic import OutputOverlapError, atomic_output, refuse
+from .runs import RunError, check_run_outputs, run_inputs
 
 __all__ = ["predict", "main", "PredictResult"]
 
@@ -45,6 +45,7 @@ class PredictResult:
     split: str
     clips: int
     datasets: list
+    recordings: int = 0
 
 
 def _np(t):
@@ -84,9 +85,16 @@ def _writer(out: Path, force: bool, attrs: dict):
 
 
 def _progress_bar():
-    """Lightning's progress bar on stderr (stdout keeps only the summary line)."""
+    """bsp-train's progress style, on stderr (stdout keeps only the summary line):
+    Lightning's bar on a terminal, plain lines in a log file or a pipe (no bar redrawn
+    with carriage returns)."""
     from lightning.pytorch.callbacks import TQDMProgressBar
     from lightning.pytorch.callbacks.progress.tqdm_progress import Tqdm
+
+    from .progress import PlainProgress, is_terminal
+
+    if not is_terminal(sys.stderr):
+        return PlainProgress()
 
     class StderrBar(TQDMProgressBar):
         def init_predict_tqdm(self):
@@ -104,8 +112,9 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
     """Writes the predictions of run directory or checkpoint ``run`` for ``split`` of its
     data (or ``data``) to the HDF5 file ``out`` (temporary name, renamed when complete;
     an existing file needs ``force``). The model runs as ``bsp-eval`` scores it (the run's
-    accelerator unless given, precision, threads, batch size and so evaluation noise), so
-    the predictions are the outputs that were scored."""
+    accelerator unless given, precision, threads, and the per-clip evaluation noise, which
+    no batch size changes), over every clip of the split, so the predictions are the
+    outputs that were scored."""
     import warnings
 
     import torch
@@ -122,6 +131,8 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
     if out.is_dir():
         raise RunError(f"{out} is a folder; the predictions are one HDF5 file (give a "
                        "file name, e.g. predictions.h5)", code=2)
+    # before any work: never overwrite what predictions are made from, through links too
+    check_run_outputs(run_inputs(run, which, data), [("--out", out)])
     if out.exists() and not force:
         raise RunError(f"{out} exists; pass --force to overwrite it", code=3)
     module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size,
@@ -133,9 +144,8 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
                             "available here; pass --accelerator cpu")
     precision = prepare_scoring(cfg, module)
     dm = make_datamodule(cfg, h5)
-    # never overwrite what predictions are made from, through links too
-    refuse_unsafe_output(out, force=True, inputs=[ckpt, h5, dm.h5_path, cfg.get("data")],
-                         in_place=out)
+    # again, with what loading the run resolved (the saved config's data, its HDF5 file)
+    check_run_outputs([ckpt, h5, dm.h5_path, cfg.get("data")], [("--out", out)])
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
     loader = dm.test_dataloader() if split == "test" else dm.val_dataloader()
     L = dm.datasets[split].clip_length
@@ -155,8 +165,11 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
     warnings.filterwarnings("ignore", message=r".*infer the batch indices.*")
     trainer.predict(module, dataloaders=loader, return_predictions=False)
     n = int(sum(len(v) for v in writer.parts["label"]))
+    recs = {(v, p) for vs, ps in zip(writer.parts.get("video_id", []),
+                                     writer.parts.get("pedestrian_id", []))
+            for v, p in zip(vs, ps)}
     return PredictResult(path=out, task=task, model=module.hparams["model"], split=split,
-                         clips=n, datasets=sorted(writer.parts))
+                         clips=n, datasets=sorted(writer.parts), recordings=len(recs))
 
 
 def main(argv=None) -> int:
@@ -164,8 +177,9 @@ def main(argv=None) -> int:
         prog="bsp-predict",
         description="Write a bsp-train model's de-normalised outputs (pixels or metres) for "
                     "one split, with clip ids, to an HDF5 file.",
-        epilog="exit codes: 0 success, 1 bad data/run/checkpoint, 2 bad arguments, 3 output "
-               "exists (use --force). docs: docs/training.md",
+        epilog="exit codes: 0 success, 1 bad data/run/checkpoint, 2 bad arguments (or --out "
+               "is one of the inputs, --force or not), 3 output exists (use --force). docs: "
+               "docs/training.md",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("run", metavar="RUN_OR_CKPT", help="run directory or .ckpt")
     p.add_argument("--out", required=True, metavar="PREDS.h5", help="HDF5 file to write")
@@ -188,6 +202,8 @@ def main(argv=None) -> int:
                       batch_size=args.batch_size, workers=args.workers,
                       accelerator=args.accelerator, noise=args.noise, mjp=args.mjp,
                       force=args.force, progress=not args.quiet)
+    except OutputOverlapError as exc:  # --out is an input, --force or not
+        return refuse("bsp-predict", exc)
     except (C.ConfigError, ValueError) as exc:
         print(f"bsp-predict: {exc}", file=sys.stderr)
         return 2
@@ -195,8 +211,8 @@ def main(argv=None) -> int:
         print(f"bsp-predict: {exc}", file=sys.stderr)
         return exc.code
     if not args.quiet:
-        print(f"wrote {res.path}: {res.clips} {res.split} clips of {res.task}/{res.model} "
-              f"({', '.join(res.datasets)})")
+        print(f"wrote {res.path}: {res.clips} {res.split} clips of {res.recordings} "
+              f"recordings, {res.task}/{res.model} ({', '.join(res.datasets)})")
     return 0
 
 

@@ -9,22 +9,17 @@ import time
 from lightning.pytorch.callbacks import TQDMProgressBar
 from lightning.pytorch.callbacks.progress.progress_bar import ProgressBar
 
-__all__ = ["PlainProgress", "progress_callbacks", "is_terminal"]
+from .._plain_progress import INTERVAL, is_terminal, stamp
 
-#: seconds between two plain progress lines within an epoch
-INTERVAL = 10.0
-
-
-def is_terminal(stream) -> bool:
-    try:
-        return bool(stream.isatty())
-    except (AttributeError, ValueError):
-        return False
+__all__ = ["PlainProgress", "progress_callbacks", "is_terminal", "INTERVAL"]
 
 
 class PlainProgress(ProgressBar):
     """One line per ``interval`` seconds of training (epoch, batch, loss, elapsed time) and
-    one at the end of each epoch with its logged metrics; no carriage returns."""
+    one at the end of each epoch with its logged metrics (its own ``train/loss``, logged by
+    the module's ``on_train_epoch_end`` after every callback's, and the ``val/`` metrics of
+    its validation); with ``trainer.predict`` (bsp-predict), a line per ``interval`` and
+    one at the end; no carriage returns."""
 
     def __init__(self, interval: float = INTERVAL, stream=None):
         super().__init__()
@@ -32,6 +27,9 @@ class PlainProgress(ProgressBar):
         self.stream = stream
         self._enabled = True
         self._t0 = self._last = 0.0
+        self._pending = None  # the finished epoch whose line waits for its train/loss
+        self._validated = False
+        self._batches = 0  # of the predict loop
 
     def disable(self) -> None:
         self._enabled = False
@@ -45,8 +43,7 @@ class PlainProgress(ProgressBar):
 
     def _say(self, text: str) -> None:
         if self.is_enabled:
-            elapsed = time.perf_counter() - self._t0
-            print(f"[{elapsed:7.1f} s] {text}", file=self.stream or sys.stderr, flush=True)
+            print(stamp(self._t0, text), file=self.stream or sys.stderr, flush=True)
 
     def _epoch(self, trainer) -> str:
         total = trainer.max_epochs if trainer.max_epochs and trainer.max_epochs > 0 else "?"
@@ -67,14 +64,57 @@ class PlainProgress(ProgressBar):
                   f"{self.total_train_batches}{tail}")
 
     def on_validation_end(self, trainer, pl_module) -> None:
-        if trainer.sanity_checking or trainer.state.fn != "fit":
+        if not trainer.sanity_checking and trainer.state.fn == "fit":
+            self._validated = True  # this epoch's val/ metrics are the ones logged
+
+    def on_train_epoch_end(self, trainer, pl_module) -> None:
+        # the module logs the epoch's train/loss in its own on_train_epoch_end, which
+        # Lightning calls after this one: the line is written once it is logged (when the
+        # next epoch starts, or training ends)
+        self._pending = self._epoch(trainer)
+
+    def on_train_epoch_start(self, trainer, pl_module) -> None:
+        self._epoch_done(trainer)
+
+    def on_train_end(self, trainer, pl_module) -> None:
+        self._epoch_done(trainer)
+
+    def _epoch_done(self, trainer) -> None:
+        if self._pending is None:
             return
+        prefixes = ("train/", "val/") if self._validated else ("train/",)
         shown = {k: float(v) for k, v in trainer.callback_metrics.items()
-                 if k.startswith(("train/", "val/")) and k.count("/") == 1
+                 if k.startswith(prefixes) and k.count("/") == 1
                  and not k.endswith("_step") and getattr(v, "numel", lambda: 1)() == 1}
         values = ", ".join(f"{k} {v:.4g}" for k, v in sorted(shown.items()))
         self._last = time.perf_counter()
-        self._say(f"{self._epoch(trainer)} done" + (f": {values}" if values else ""))
+        self._say(f"{self._pending} done" + (f": {values}" if values else ""))
+        self._pending, self._validated = None, False
+
+    # ------------------------------------------------------ bsp-predict
+    def _loop_start(self) -> None:
+        self._last = time.perf_counter()
+        self._t0 = self._t0 or self._last
+        self._batches = 0
+
+    def _loop_batch(self, what: str, batch_idx: int, batches, dataloader_idx: int) -> None:
+        self._batches += 1
+        total = batches[dataloader_idx] if isinstance(batches, list) else batches
+        now = time.perf_counter()
+        if now - self._last >= self.interval:
+            self._last = now
+            self._say(f"{what}, batch {batch_idx + 1}/{total}")
+
+    def on_predict_start(self, trainer, pl_module) -> None:
+        self._loop_start()
+
+    def on_predict_batch_end(self, trainer, pl_module, outputs, batch, batch_idx,
+                             dataloader_idx=0) -> None:
+        self._loop_batch("predicting", batch_idx, trainer.num_predict_batches,
+                         dataloader_idx)
+
+    def on_predict_end(self, trainer, pl_module) -> None:
+        self._say(f"predicting done: {self._batches} batch(es)")
 
 
 def progress_callbacks(quiet: bool, stream=None) -> list:

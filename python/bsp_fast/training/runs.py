@@ -17,11 +17,12 @@ import os
 import shutil
 from pathlib import Path
 
-from ..atomic import publish, temp_path, write_text
+from ..atomic import DATASET_FILES, check_outputs, publish, temp_path, write_text
 
 __all__ = ["RunDirectory", "RunError", "default_run_dir", "resolve_checkpoint", "read_run",
            "ENV_TMP", "MARKER", "write_marker", "read_marker", "orphaned_runs",
-           "resume_hint", "resumable", "is_temporary"]
+           "resume_hint", "resumable", "is_temporary", "refuse_unsafe_output",
+           "check_run_outputs", "run_inputs"]
 
 #: Set by the process that created the temporary run directory, so DDP processes that
 #: Lightning starts later (they re-run the command) write into the same directory.
@@ -131,33 +132,73 @@ def is_run_directory(path) -> bool:
     return isinstance(cfg, dict) and "task" in cfg and "model" in cfg
 
 
-def _same(a: Path, b: Path) -> bool:
+def _dataset_dirs(inputs) -> list:
+    """``read_dirs`` of :func:`bsp_fast.atomic.check_outputs` for the inputs that are
+    datasets (a folder holding data.csv, or a data.csv): their data.csv, config.yaml and
+    media are read."""
+    dirs = []
+    for item in inputs:
+        inp = item[1] if isinstance(item, tuple) else item
+        if inp is None:
+            continue
+        p = Path(inp)
+        if p.is_dir() and (p / "data.csv").is_file():
+            dirs.append(("the dataset", p, DATASET_FILES))
+        elif p.suffix.lower() == ".csv":
+            dirs.append(("the dataset", p.parent, DATASET_FILES))
+    return dirs
+
+
+def check_run_outputs(inputs=(), outputs=()) -> None:
+    """:func:`bsp_fast.atomic.check_outputs` for the training commands: ``inputs`` (paths
+    or ``(name, path)``; "the run's input" by default) and, for a dataset among them, the
+    files of its folder. Raises :class:`~bsp_fast.atomic.OutputOverlapError` (exit 2)."""
+    named = [i if isinstance(i, tuple) else ("the run's input", i) for i in inputs]
+    check_outputs(inputs=named, outputs=outputs, read_dirs=_dataset_dirs(named))
+
+
+def run_inputs(run, which: str = "best", data=None) -> list:
+    """What bsp-eval and bsp-predict read of ``run`` (a run directory or checkpoint),
+    found without loading anything: the run, its checkpoint and config.yaml, ``data`` or
+    else the data (and HDF5 file) the run's config.yaml names; ``(name, path)`` pairs for
+    :func:`check_run_outputs`. A run that cannot be resolved gives what is known (loading
+    it says why it cannot be used)."""
+    inputs = [("the input run", run), ("the input --data", data)]
     try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return False
+        ckpt, run_dir = resolve_checkpoint(run, which)
+    except (RunError, OSError):
+        return inputs
+    inputs.append(("the input checkpoint", ckpt))
+    if run_dir is None:
+        return inputs
+    inputs.append(("the input run config", Path(run_dir) / "config.yaml"))
+    if data is None:
+        try:
+            resolved = (read_run(run_dir)["config"].get("resolved") or {})
+        except Exception:  # unreadable: load_run says so
+            resolved = {}
+        if isinstance(resolved, dict):
+            for key in ("data", "h5"):
+                if isinstance(resolved.get(key), str):
+                    inputs.append(("the run's input", resolved[key]))
+    return inputs
 
 
 def refuse_unsafe_output(out, *, force: bool, inputs=(), in_place=None) -> None:
-    """Checks a run's output folder before any work (``RunError`` with exit code 2 or 3):
+    """Checks a run's output folder before any work:
 
     * it must not be, or hold, one of the run's ``inputs`` (the dataset folder, its
       data.csv, the HDF5 file, a --config file, a checkpoint to start from), through
-      symlinks and hard links too;
-    * an existing ``out`` is replaced only with ``force`` (else code 3), and only when it is
-      an earlier run directory (:func:`is_run_directory`) or ``in_place`` (the run being
-      resumed): ``--force`` never deletes a folder or file bsp-train did not write.
+      symlinks and hard links too, nor replace a file of an input dataset
+      (:func:`check_run_outputs`: :class:`~bsp_fast.atomic.OutputOverlapError`, exit 2);
+    * an existing ``out`` is replaced only with ``force`` (else ``RunError`` code 3), and
+      only when it is an earlier run directory (:func:`is_run_directory`) or ``in_place``
+      (the run being resumed): ``--force`` never deletes a folder or file bsp-train did not
+      write (``RunError`` code 2).
     """
     out = Path(out)
     real = Path(os.path.realpath(out))
-    for inp in inputs:
-        if inp is None:
-            continue
-        inp = Path(inp)
-        r = Path(os.path.realpath(inp))
-        if r == real or real in r.parents or (out.exists() and _same(out, inp)):
-            raise RunError(f"--out {out} is or holds the run's input {inp}; refusing to "
-                           "write there (choose another --out)", code=2)
+    check_run_outputs(inputs, [("--out", out)])
     if not (out.exists() or out.is_symlink()):
         return
     if in_place is not None and real == Path(os.path.realpath(in_place)):

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import config as C
-from ..atomic import remove
+from ..atomic import OutputOverlapError, refuse, remove, write_bytes
 from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, is_temporary, \
     read_marker, read_run, refuse_unsafe_output, resolve_checkpoint, resume_hint, write_json, \
     write_marker
@@ -51,7 +51,7 @@ def resolve_config(cli: dict, config_path=None) -> tuple:
     resume = None
     target = cli.get("resume", from_yaml.get("resume"))
     if target:
-        from .tasks import checkpoint_info
+        from .module import checkpoint_info
 
         ckpt, run_dir = resolve_checkpoint(target, "last")
         try:  # truncated, foreign or pickled files: one line, before any work
@@ -71,7 +71,8 @@ def resolve_config(cli: dict, config_path=None) -> tuple:
             known["data"] = resolved["data"]  # a relative path, resumed from elsewhere
         cfg.update(C.normalise(known, f"{target} (saved config)"))
         orphan = run_dir is not None and is_temporary(run_dir)
-        resume = {"ckpt": Path(ckpt), "run_dir": run_dir, "orphan": orphan}
+        resume = {"ckpt": Path(ckpt), "run_dir": run_dir, "orphan": orphan,
+                  "epoch": info.get("epoch")}  # Lightning's current_epoch at the save
         if orphan:  # a killed run: it goes to the --out it was started with
             cfg["out"] = (read_marker(run_dir) or {}).get("out") or resolved.get("out")
         for key in ("task", "model"):
@@ -113,10 +114,11 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
     import lightning.pytorch as pl
     import torch
 
-    from .lifecycle import Interrupted, Lifecycle, OutputWriteError, parse_duration
+    from .lifecycle import (Interrupted, Lifecycle, OutputWriteError, epochs_note,
+                            parse_duration, test_checkpoint)
 
     from .initial import log_initial
-    from .tasks import TASK_MODULES
+    from .module import TASK_MODULES
 
     shared = _shared_tmp(cfg)
     in_place = resume["run_dir"] if resume is not None else None
@@ -149,14 +151,19 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
     ckpt_path = None
     if resume is not None:
         ckpt_path = resume["ckpt"]
+    # --epochs below the epochs a resumed run already completed: Lightning refuses to
+    # restore it (MisconfigurationException); capped there, fit returns at once instead
+    # and the run ends with the epochs it has (lifecycle.epochs_note)
+    saved = resume.get("epoch") if resume is not None else None
+    floor = saved if isinstance(saved, int) and saved > cfg["epochs"] else None
     if child:
         tmp = Path(os.environ[ENV_TMP])
         life = Lifecycle(tmp, parse_duration(cfg["checkpoint_every"]), sig)
-        trainer = make_trainer(cfg, tmp, precision, callbacks=[life])
+        trainer = make_trainer(cfg, tmp, precision, callbacks=[life], max_epochs=floor)
         if resume is not None and resume["run_dir"] is not None:
             ckpt_path = tmp / "checkpoints" / "last.ckpt"
         trainer.fit(module, datamodule=dm, ckpt_path=ckpt_path)
-        trainer.test(module, datamodule=dm, ckpt_path="best", verbose=False)
+        test_checkpoint(trainer, module, dm, tmp)  # the same checkpoint as the first process
         return None
     final = Path(cfg["out"])
     copy_from = resume["run_dir"] if resume is not None else None
@@ -177,7 +184,8 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
         # a run stopped after its training ended (while testing or writing metrics):
         # its last epoch again as the cap, so fit restores the callbacks and returns
         done = previous.get("fit_done") if previous else None
-        trainer = make_trainer(cfg, tmp, precision, callbacks=[life], max_epochs=done)
+        trainer = make_trainer(cfg, tmp, precision, callbacks=[life],
+                               max_epochs=done or floor)
         if not cfg["quiet"]:
             n = {s: len(d) for s, d in dm.datasets.items()}
             print(f"bsp-train: {cfg['task']} / {cfg['model']}, {trainer.accelerator.__class__.__name__.replace('Accelerator', '').lower()} "
@@ -203,10 +211,16 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
             seconds["fit_cpu"] = time.process_time() - cpu0  # this process's threads
             write_marker(tmp, **life_marker, state="running", fit_done=trainer.current_epoch,
                          epoch=trainer.current_epoch, step=trainer.global_step)
+            cfg = epochs_note(cfg, trainer, trained=life.trained or bool(done))
             t0 = time.perf_counter()
-            trainer.test(module, datamodule=dm, ckpt_path="best", verbose=False)
+            tested = test_checkpoint(trainer, module, dm, tmp)
             seconds["test"] = time.perf_counter() - t0
-            result = _finish(cfg, tmp, final, trainer, initial, precision, seconds)
+            if tested == "last":
+                print("bsp-train: note: no validation ran in this run (it ended before its "
+                      "first epoch's validation), so there is no best checkpoint: validated "
+                      "and tested the last one (checkpoints/last.ckpt, also saved as best.ckpt)",
+                      file=sys.stderr)
+            result = _finish(cfg, tmp, final, trainer, initial, precision, seconds, tested)
         except (Interrupted, OutputWriteError) as exc:
             last = tmp / "checkpoints" / "last.ckpt"
             if last.is_file() and last.stat().st_mtime >= t_start:
@@ -240,12 +254,13 @@ def _initial(cfg: dict, dm, model=None) -> dict:
                            limit=cfg["limit_batches"], model=model, per_recording=True)
 
 
-def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds):
+def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds,
+            tested: str = "best"):
     from .curves import plot_curves, read_logs
     from .lifecycle import OutputWriteError
 
     test = dict(trainer.lightning_module.results.get("test", {}))
-    from .breakdown import write_breakdown
+    from .per_recording import write_breakdown
 
     initial = dict(initial)  # the per-recording sums go to their own file, not metrics.json
     write_breakdown(tmp, cfg["task"], trainer.lightning_module.results.get("test_per_recording"),
@@ -254,16 +269,21 @@ def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds):
     logs = read_logs(tmp)  # the best epoch's other val metrics, as logged
     val = {k.split("/", 1)[1]: s[best_epoch - 1] for k, s in logs.items()
            if k.startswith("val/") and best_epoch - 1 in s} if best_epoch is not None else {}
+    if tested == "last":  # no epoch was validated: the tested checkpoint's val metrics
+        val = {k: float(v) for k, v in trainer.lightning_module.results.get("val", {}).items()}
     epochs = int(trainer.current_epoch)
     module = trainer.lightning_module
     units = get_task(cfg["task"]).units
     metrics = {"task": cfg["task"], "model": cfg["model"],
                "hparams": module.hparams["hparams"], "test": test, "val": val,
                "initial": initial, "best_epoch": best_epoch,
-               "epochs": epochs, "best_checkpoint": "checkpoints/best.ckpt",
+               "epochs": epochs, "best_checkpoint": "checkpoints/best.ckpt", "tested": tested,
                "units": {k: units[k] for k in test if k in units}, "precision": precision,
                "world_size": int(trainer.world_size), "seconds": seconds}
     try:
+        if tested == "last":  # the checkpoint the metrics are of, where bsp-eval looks
+            write_bytes(tmp / "checkpoints" / "best.ckpt",
+                        (tmp / "checkpoints" / "last.ckpt").read_bytes())
         write_json(metrics, tmp / "metrics.json")
         _write_config(cfg, tmp, precision, h5=trainer.datamodule.h5_path,
                       hparams=metrics["hparams"], world_size=metrics["world_size"])
@@ -304,7 +324,7 @@ def _write_config(cfg: dict, tmp: Path, precision: str, **resolved) -> None:
 
 def _best_epoch(trainer) -> int | None:
     """1-based epoch of ``ModelCheckpoint``'s best checkpoint (None: none validated)."""
-    from .tasks import checkpoint_info
+    from .module import checkpoint_info
 
     best = trainer.checkpoint_callback
     if not best.best_model_path or best.best_model_score is None:
@@ -373,6 +393,8 @@ def main(argv=None) -> int:
         parser.print_usage(sys.stderr)
         print(f"bsp-train: error: {exc}", file=sys.stderr)
         return 2
+    except OutputOverlapError as exc:  # --out is or holds an input, --force or not
+        return refuse("bsp-train", exc)
     except C.ConfigError as exc:
         print(f"bsp-train: {exc}", file=sys.stderr)
         return 2

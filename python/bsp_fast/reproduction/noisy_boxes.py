@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from ..atomic import write_text
-from .runs import RunError
+from ..training.runs import RunError
 
 __all__ = ["noisy_box_metrics"]
 
@@ -24,7 +24,7 @@ def noisy_box_metrics(tab: dict, run_dir: Path, force: bool, quiet: bool, log) -
     if path.is_file() and not force:
         doc = json.loads(path.read_text(encoding="utf-8"))
     else:
-        from .evaluate import evaluate
+        from ..training.evaluate import evaluate
 
         noise = (float(spec["scale"]), float(spec["shift"]))
         log(f"[{run_dir.name}] scoring the test split with noisy boxes (scale ±{noise[0]:g}, "

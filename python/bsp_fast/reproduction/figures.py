@@ -106,12 +106,12 @@ def draw_figures(tab: dict, res: dict, out_dir=None) -> list:
     figs = tab.get("figures") or []
     if not figs:
         return []
-    import matplotlib
+    from .._extras import require
 
-    matplotlib.use("Agg", force=True)
+    require("matplotlib", "bsp-reproduce's figures").use("Agg", force=True)
     import matplotlib.pyplot as plt
 
-    from .curves import save_figure
+    from ..training.curves import save_figure
 
     written = []
     n_seeds = len(res.get("seeds") or [1])
@@ -146,3 +146,56 @@ def draw_figures(tab: dict, res: dict, out_dir=None) -> list:
         out = Path(out_dir if out_dir is not None else res["dir"]) / fig["file"]
         written.append(save_figure(f, out))
     return written
+
+
+# ---------------------------------------------------------------------- learning curves
+def _val_series(run_dir: Path, metric: str) -> dict:
+    """``{optimiser updates: val metric}`` of one run, from the CSV logs as
+    :func:`~bsp_fast.training.curves.read_logs` reads them (Lightning logs epoch-end values
+    at the index of the epoch's last update, hence + 1)."""
+    from ..training.curves import read_logs
+
+    logs = read_logs(run_dir)
+    steps = logs.get("step", {})
+    return {int(steps[e]) + 1: v for e, v in logs.get(f"val/{metric}", {}).items()
+            if e in steps}
+
+
+def learning_curves(tab: dict, res: dict, path=None):
+    """``curves.png`` of a table: the validation main metric (the table's first) against
+    optimiser updates for every trained row, the mean over seeds and a band of ± one
+    standard deviation. Returns the path, or None when nothing was logged."""
+    import numpy as np
+
+    metric = next(iter(tab["metrics"]))
+    series = {}
+    for name, r in res["results"].items():
+        if r.get("source") != "test":
+            continue
+        runs = [_val_series(Path(s["run"]), metric) for s in r["seeds"].values()]
+        steps = sorted({k for run in runs for k in run})
+        if steps:
+            vals = [[run[k] for run in runs if k in run] for k in steps]
+            series[name] = (np.array(steps), np.array([np.mean(v) for v in vals]),
+                            np.array([np.std(v) for v in vals]))
+    if not series:
+        return None
+    from .._extras import require
+    from ..training.curves import save_figure
+
+    require("matplotlib", "bsp-reproduce's curves.png").use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for name, (x, mean, std) in series.items():
+        line, = ax.plot(x, mean, marker=".", label=name)
+        ax.fill_between(x, mean - std, mean + std, color=line.get_color(), alpha=0.2)
+    spec = tab["metrics"][metric]
+    ax.set_xlabel("optimiser updates")
+    ax.set_ylabel(f"val {spec['label']}")
+    ax.grid(alpha=0.3)
+    ax.legend(title=f"mean ± std over {len(res.get('seeds') or [1])} seed(s)")
+    ax.set_title(f"{tab['table']} — budget {res['budget']}")
+    fig.tight_layout()
+    out = Path(path) if path is not None else Path(res["dir"]) / "curves.png"
+    return save_figure(fig, out)

@@ -50,8 +50,8 @@ def _fresh(run_dir: Path, file: Path) -> bool:
 def run_breakdowns(res: dict, force: bool = False, log=print) -> dict:
     """``{row: [document per seed]}``: each run's saved breakdown, computed (and saved)
     where missing or stale."""
-    from .eval_breakdown import FILE
-    from .evaluate import breakdown
+    from ..training.eval_breakdown import FILE
+    from ..training.evaluate import breakdown
 
     docs: dict = {}
     for name, seed, run_dir in run_dirs(res):
@@ -151,12 +151,12 @@ def _slug(title: str) -> str:
 def draw_breakdowns(agg: list, labels: dict, out_dir, title: str, budget: str) -> list:
     """One grouped bar figure per breakdown table (bars: rows; error bars: ± std over
     seeds), ``OUT/breakdown-<table>.png``; returns the paths."""
-    import matplotlib
+    from .._extras import require
 
-    matplotlib.use("Agg", force=True)
+    require("matplotlib", "bsp-reproduce --breakdown's figures").use("Agg", force=True)
     import matplotlib.pyplot as plt
 
-    from .curves import save_figure
+    from ..training.curves import save_figure
 
     written = []
     for t in agg:
@@ -191,7 +191,7 @@ def draw_breakdowns(agg: list, labels: dict, out_dir, title: str, budget: str) -
 def table_breakdown(tab: dict, res: dict, force: bool = False, log=print) -> list:
     """Everything ``--breakdown`` adds to a table's folder; returns the paths written."""
     from ..atomic import write_text
-    from .breakdown_format import plain
+    from ..training.breakdown_format import plain
 
     docs = run_breakdowns(res, force, log)
     if not docs:

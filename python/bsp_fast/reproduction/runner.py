@@ -1,11 +1,13 @@
-"""``bsp-reproduce TABLE --seeds N``: every row of a table trained with N training seeds
-(weights, batch order, noise draws; with ``--split-seeds`` also the recording split), the
-seeds run as parallel processes of one torch thread each, finished runs reused; the
-table's budget rule checked; the learning curves of the table drawn. The statistics over
-seeds and recordings are :mod:`bsp_fast.training.evidence`'s. See docs/reproduce.md.
+"""The one runner of ``bsp-reproduce``: every row of a table trained with one seed (N = 1:
+the single-run table, runs in ``OUT/TABLE-BUDGET/ROW/``) or N training seeds (weights,
+batch order, noise draws; with ``--split-seeds`` also the recording split; runs in
+``OUT/TABLE-BUDGET/ROW/seed-S/``), the seeds run as parallel processes of one torch thread
+each, finished runs reused and interrupted ones continued; the table's budget rule
+checked. Both give one result shape (:func:`run_table`); the statistics over seeds and
+recordings are :mod:`.evidence`'s, the report :mod:`.report`'s. See docs/reproduce.md.
 
-Runs go to ``OUT/TABLE-BUDGET/ROW/seed-S/`` (ordinary ``bsp-train`` run directories), their
-configs to ``OUT/TABLE-BUDGET/configs/ROW-seed-S.yaml``.
+Configs go to ``OUT/TABLE-BUDGET/configs/ROW.yaml`` (one seed) or ``ROW-seed-S.yaml``,
+each usable as ``bsp-train --config``.
 """
 from __future__ import annotations
 
@@ -14,21 +16,18 @@ import sys
 import time
 from pathlib import Path
 
-from . import config as C
 from ..atomic import write_text
 from ..defaults import SEED
-from .breakdown import FILE as BREAKDOWN
-from .curves import save_figure
+from ..training import config as C
+from ..training.per_recording import FILE as BREAKDOWN
+from ..training.runs import RunError, read_run, resumable
+from .noisy_boxes import noisy_box_metrics
 from .table_files import (BUDGETS, RULE_KEYS, check_budget_rule, load_table, prepare_row_data,
                           row_options, wanted_rows)
-from .noisy_boxes import noisy_box_metrics
-from .runs import RunError, read_run, resumable
 
-__all__ = ["RULE_KEYS", "check_budget_rule", "seed_list", "reproduce_seeds", "add_options",
-           "learning_curves"]
+__all__ = ["RULE_KEYS", "check_budget_rule", "seed_list", "run_table", "reproduce",
+           "reproduce_seeds", "add_options"]
 
-#: options that make a table's budget rule: every row of a budget shares them, except a
-#: row's ``batch_size`` when the row says why (``own_batch_size``)
 def seed_list(n: int, base: int = SEED) -> list:
     """The training seeds of ``--seeds n``: ``base, base + 1, ...`` (the first is a
     single-seed run's)."""
@@ -53,21 +52,27 @@ def add_options(p) -> None:
                         "thread each (default: the number of cores)")
 
 
-def _plan(tab, data, budget, base: Path, wanted, seeds, split_seeds, overrides, threads):
+def _plan(tab, data, budget, base: Path, wanted, seeds, split_seeds, overrides, threads,
+          convert: bool = True):
+    """``[(row, seed, run_dir, opts)]``; ``seeds`` None: one run per row in ``ROW/`` with
+    the options' own seed (the single-run table)."""
     plan = []
     for row in tab["rows"]:
         if row["name"] not in wanted or row.get("initial_of"):
             continue
-        for seed in seeds:
-            run_dir = base / row["name"] / f"seed-{seed}"
-            extra = dict(overrides or {}, seed=seed)
-            if split_seeds:
-                extra["split_seed"] = seed
+        for seed in seeds or [None]:
+            extra = dict(overrides or {})
+            run_dir = base / row["name"]
+            if seed is not None:
+                run_dir = run_dir / f"seed-{seed}"
+                extra["seed"] = seed
+                if split_seeds:
+                    extra["split_seed"] = seed
             if threads:
                 extra["threads"] = threads
             opts = row_options(tab, row, budget, data, run_dir, extra)
-            C.validate(C.defaults() | opts)
-            opts = prepare_row_data(tab, row, opts)
+            C.validate(C.defaults() | opts)  # unknown models / hyper-parameters fail first
+            opts = prepare_row_data(tab, row, opts, convert=convert)
             plan.append((row, seed, run_dir, opts))
     return plan
 
@@ -75,7 +80,7 @@ def _plan(tab, data, budget, base: Path, wanted, seeds, split_seeds, overrides, 
 def _convert_once(plan) -> None:
     """Converts each distinct dataset conversion before the parallel runs start (two
     processes must not write the same cache file)."""
-    from .train import make_datamodule, prepare_data
+    from ..training.train import make_datamodule, prepare_data
 
     done = set()
     for _, _, _, opts in plan:
@@ -108,7 +113,7 @@ def _env() -> dict:
 def _run(todo, jobs: int, quiet: bool, log) -> None:
     """Trains ``todo`` (``(name, config path)``) in up to ``jobs`` processes at once."""
     if jobs <= 1:  # in this process, one run after the other
-        from .train import train
+        from ..training.train import train
 
         for name, cfg_path, stopped in todo:
             t0 = time.perf_counter()
@@ -116,6 +121,7 @@ def _run(todo, jobs: int, quiet: bool, log) -> None:
                 log(f"[{name}] continuing the interrupted run {stopped}")
                 train(resume=str(stopped), quiet=quiet)
             else:
+                log(f"[{name}] training: bsp-train --config {cfg_path}")
                 train(config=str(cfg_path), force=True, quiet=quiet)
             log(f"[{name}] done in {time.perf_counter() - t0:.0f} s")
         return
@@ -162,114 +168,92 @@ def _seed_result(run_dir: Path) -> dict:
             else None, "noise": run["config"].get("noise"), "mjp": run["config"].get("mjp")}
 
 
-def reproduce_seeds(table, data, budget: str = "quick", out="runs", *, seeds: int = 2,
-                    split_seeds: bool = False, jobs: int | None = None, rows=None,
-                    overrides=None, force: bool = False, quiet: bool = True,
-                    dry_run: bool = False, log=print) -> dict:
-    """Trains the rows of ``table`` with ``seeds`` training seeds each (``jobs`` processes
-    at once, one torch thread each when ``jobs`` > 1) and returns ``{"table", "budget",
-    "dir", "seeds", "split_seeds", "results": {row: {"seeds": {seed: {...}}, "noise",
-    "mjp", "source"}}}``; the statistics are :func:`evidence.summarise`'s."""
+def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | None = None,
+              split_seeds: bool = False, jobs: int | None = None, rows=None, overrides=None,
+              force: bool = False, quiet: bool = True, dry_run: bool = False,
+              log=print) -> dict:
+    """Trains the rows of ``table`` (all, or the names in ``rows``), reusing finished runs
+    unless ``force``, and returns ``{"table", "budget", "dir", "seeds", "split_seeds",
+    "results": {row: {"seeds": {seed: {...one run...}}, "source", "noise", "mjp"}}}``.
+
+    ``seeds=None``: one run per row in ``ROW/`` with the table's options' seed, trained in
+    this process (the single-run table; ``res["seeds"]`` is None and each row also carries
+    its one run's ``metrics``, ``initial``, ``epochs``, ``best_epoch``, ``seconds`` and
+    ``run``). ``seeds=N``: N training seeds per row in ``ROW/seed-S/``, ``jobs`` processes
+    at once (one torch thread each when ``jobs`` > 1); the statistics are
+    :func:`.evidence.summarise`'s."""
     tab = table if isinstance(table, dict) else load_table(table)
     if budget not in BUDGETS:
         raise ValueError(f"budget must be one of {list(BUDGETS)}, got {budget!r}")
-    seed_values = seed_list(seeds)
+    seed_values = None if seeds is None else seed_list(seeds)
+    if seed_values is None:
+        jobs = 1
     jobs = (os.cpu_count() or 1) if jobs is None else jobs
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
+    if split_seeds and seed_values is None:
+        raise ValueError("--split-seeds varies the split with the seeds: give seeds")
     if split_seeds and Path(data).suffix in (".h5", ".hdf5"):
         raise ValueError("--split-seeds needs a dataset directory: an HDF5 file holds one "
                          "split")
     wanted = wanted_rows(tab, rows)
     base = Path(out) / f"{tab['table']}-{budget}"
     plan = _plan(tab, data, budget, base, wanted, seed_values, split_seeds, overrides,
-                 1 if jobs > 1 else None)
+                 1 if jobs > 1 else None, convert=not dry_run)
     todo = []
     for row, seed, run_dir, opts in plan:
         import yaml
 
-        cfg_path = base / "configs" / f"{row['name']}-seed-{seed}.yaml"
+        label = row["name"] if seed is None else f"{row['name']} seed {seed}"
+        name = row["name"] if seed is None else f"{row['name']}-seed-{seed}"
+        cfg_path = base / "configs" / f"{name}.yaml"
         cfg_path.parent.mkdir(parents=True, exist_ok=True)
-        write_text(cfg_path, "# bsp-reproduce: one row and seed, usable as bsp-train "
-                   "--config\n" + yaml.safe_dump(opts, sort_keys=False))
+        what = "one row" if seed is None else "one row and seed"
+        write_text(cfg_path, f"# bsp-reproduce: {what}, usable as bsp-train --config\n"
+                   + yaml.safe_dump(opts, sort_keys=False))
         if dry_run:
             log(f"bsp-train --config {cfg_path}")
         elif (run_dir / "metrics.json").is_file() and not force:
-            log(f"[{row['name']} seed {seed}] reusing {run_dir} (--force to train again)")
+            log(f"[{label}] reusing {run_dir} (--force to train again)")
         else:  # an interrupted run of an earlier call continues (unless --force)
-            todo.append((f"{row['name']} seed {seed}", cfg_path,
-                         None if force else resumable(run_dir)))
+            todo.append((label, cfg_path, None if force else resumable(run_dir)))
+    out_res = {"table": tab["table"], "budget": budget, "dir": str(base),
+               "seeds": seed_values, "split_seeds": bool(split_seeds), "results": {}}
     if dry_run:
-        return {"table": tab["table"], "budget": budget, "dir": str(base), "results": {}}
+        return out_res
     if todo:
-        _convert_once(plan)
-        log(f"training {len(todo)} run(s), {min(jobs, len(todo))} at a time")
+        if jobs > 1:
+            _convert_once(plan)
+            log(f"training {len(todo)} run(s), {min(jobs, len(todo))} at a time")
         _run(todo, jobs, quiet, log)
-    results = {}
+    results = out_res["results"]
     for row, seed, run_dir, _ in plan:
         r = results.setdefault(row["name"], {"seeds": {}, "source": "test"})
-        r["seeds"][str(seed)] = one = _seed_result(run_dir)
-        if not row.get("initial_of"):  # pose estimation: the same run on noisy boxes
-            one["metrics"].update(noisy_box_metrics(tab, run_dir, force, quiet, log))
+        r["seeds"][str(SEED if seed is None else seed)] = one = _seed_result(run_dir)
+        one["metrics"].update(noisy_box_metrics(tab, run_dir, force, quiet, log))
         r["noise"], r["mjp"] = one["noise"], one["mjp"]
+        if seed is None:  # the single run's own numbers, as the one-run report reads them
+            r.update({k: one[k] for k in ("metrics", "initial", "baseline", "epochs",
+                                          "best_epoch", "seconds", "run")})
     for row in tab["rows"]:  # rows read from another row's trivial baseline
         src = row.get("initial_of")
         if row["name"] in wanted and src and src in results:
-            results[row["name"]] = dict(results[src], source="initial", run_of=src)
-    return {"table": tab["table"], "budget": budget, "dir": str(base), "seeds": seed_values,
-            "split_seeds": bool(split_seeds), "results": results}
+            r = results[row["name"]] = dict(results[src], source="initial", run_of=src)
+            if seed_values is None:
+                r.update(metrics=dict(r["initial"]), epochs=None, best_epoch=None, seconds={},
+                         run=r["run"] + " (initial metrics)")
+    return out_res
 
 
-# ---------------------------------------------------------------------- learning curves
-def _val_series(run_dir: Path, metric: str) -> dict:
-    """``{optimiser updates: val metric}`` of one run, from its CSV logs."""
-    import csv
-
-    out = {}
-    for f in sorted(Path(run_dir).glob("logs/version_*/metrics.csv")):
-        with open(f, newline="", encoding="utf-8") as fh:
-            for row in csv.DictReader(fh):
-                text, step = row.get(f"val/{metric}"), row.get("step")
-                if text not in (None, "") and step not in (None, ""):
-                    # Lightning logs epoch-end values at the index of the last update
-                    out[int(float(step)) + 1] = float(text)
-    return out
+def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrides=None,
+              force: bool = False, quiet: bool = True, dry_run: bool = False,
+              log=print) -> dict:
+    """The single-run table: :func:`run_table` with one seed per row (``ROW/`` layout)."""
+    return run_table(table, data, budget, out, rows=rows, overrides=overrides, force=force,
+                     quiet=quiet, dry_run=dry_run, log=log)
 
 
-def learning_curves(tab: dict, res: dict, path=None):
-    """``curves.png`` of a table: the validation main metric (the table's first) against
-    optimiser updates for every trained row, the mean over seeds and a band of ± one
-    standard deviation. Returns the path, or None when nothing was logged."""
-    import numpy as np
-
-    metric = next(iter(tab["metrics"]))
-    series = {}
-    for name, r in res["results"].items():
-        if r.get("source") != "test":
-            continue
-        runs = [_val_series(Path(s["run"]), metric) for s in r["seeds"].values()]
-        steps = sorted({k for run in runs for k in run})
-        if steps:
-            vals = [[run[k] for run in runs if k in run] for k in steps]
-            series[name] = (np.array(steps), np.array([np.mean(v) for v in vals]),
-                            np.array([np.std(v) for v in vals]))
-    if not series:
-        return None
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for name, (x, mean, std) in series.items():
-        line, = ax.plot(x, mean, marker=".", label=name)
-        ax.fill_between(x, mean - std, mean + std, color=line.get_color(), alpha=0.2)
-    spec = tab["metrics"][metric]
-    ax.set_xlabel("optimiser updates")
-    ax.set_ylabel(f"val {spec['label']}")
-    ax.grid(alpha=0.3)
-    ax.legend(title=f"mean ± std over {len(res.get('seeds') or [1])} seed(s)")
-    ax.set_title(f"{tab['table']} — budget {res['budget']}")
-    fig.tight_layout()
-    out = Path(path) if path is not None else Path(res["dir"]) / "curves.png"
-    return save_figure(fig, out)
+def reproduce_seeds(table, data, budget: str = "quick", out="runs", *, seeds: int = 2,
+                    **options) -> dict:
+    """:func:`run_table` with ``seeds`` training seeds per row (``ROW/seed-S/``)."""
+    return run_table(table, data, budget, out, seeds=seeds, **options)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .runs import read_run
+from ..training.runs import read_run
 
 __all__ = ["COST_HEADER", "run_cost", "cost_cells"]
 
@@ -18,7 +18,8 @@ def run_cost(run_dir) -> dict:
     its data file is gone)."""
     from ..data import ClipDataset
     from ..models.cost import flops_per_clip, parameter_count
-    from .tasks import get_task, load_module
+    from ..training.module import load_module
+    from ..training.tasks import get_task
 
     run_dir = Path(run_dir)
     if not (run_dir / "checkpoints" / "best.ckpt").is_file():

@@ -3,24 +3,30 @@ sizes, "fails", "beats the trivial baseline" (``bsp-reproduce`` without ``--seed
 it, :mod:`.evidence` marks them from intervals). See docs/reproduce.md."""
 from __future__ import annotations
 
-from .tasks import get_task
+import math
+
+from ..training.tasks import get_task
 from .table_files import rows_of
 
-__all__ = ["evaluate_findings", "format_value", "YES", "NO", "NA"]
+__all__ = ["evaluate_findings", "format_value", "better", "YES", "NO", "NA"]
 
 YES, NO, NA = "reproduced", "not reproduced", "n/a"
 
 
-def _better(tab, metric) -> int:
+def better(tab, metric) -> int:
     """+1 when higher is better, -1 when lower is, 0 when neither."""
     return {"higher": 1, "lower": -1}.get(tab["metrics"][metric].get("better"), 0)
 
 
-def format_value(tab, metric, value) -> str:
-    if value is None:
+def format_value(tab, metric, value, diff: bool = False) -> str:
+    """The one value formatter of the tables: the metric's ``format`` (``pct``: percent
+    with one decimal), ``diff`` with a sign; "–" for no value or NaN."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
         return "–"
-    fmt = tab["metrics"][metric].get("format", ".3f")
-    return f"{100 * value:.1f}" if fmt == "pct" else format(value, fmt)
+    fmt = tab["metrics"].get(metric, {}).get("format", ".3f")
+    if fmt == "pct":
+        return f"{100 * value:+.1f}" if diff else f"{100 * value:.1f}"
+    return format(value, ("+" if diff else "") + fmt)
 
 
 def _rel(a, b, relation, margin=0.0) -> bool:
@@ -31,7 +37,7 @@ def _rel(a, b, relation, margin=0.0) -> bool:
 def _finding(tab, f, values: dict, initial: dict) -> tuple:
     """(ours, report, status) of one finding; ``values[source][row]`` is the metric of a row
     (source ``ours`` or ``report``); ``initial[row]`` the trivial baseline's (ours only)."""
-    metric, sign = f["metric"], _better(tab, f["metric"])
+    metric, sign = f["metric"], better(tab, f["metric"])
     fm = lambda v: format_value(tab, metric, v)  # noqa: E731
     pp = " p.p." if tab["metrics"][metric].get("format") == "pct" else ""
     out = {}

@@ -13,24 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from ..metrics import uncertainty as U
+from .findings import better as _sign, format_value
 
-__all__ = ["summarise", "evaluate_findings", "format_table", "main_seeds", "DROP_TOLERANCE"]
+__all__ = ["summarise", "evaluate_findings", "DROP_TOLERANCE"]
 
 #: tolerance on an effect size the report gives when its finding states none: half of it
 DROP_TOLERANCE = 0.5
-
-
-def _sign(tab, metric) -> int:
-    return {"higher": 1, "lower": -1}.get(tab["metrics"][metric].get("better"), 0)
-
-
-def _num(tab, metric, v, diff: bool = False) -> str:
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "–"
-    fmt = tab["metrics"].get(metric, {}).get("format", ".3f")
-    if fmt == "pct":
-        return f"{100 * v:+.1f}" if diff else f"{100 * v:.1f}"
-    return format(v, ("+" if diff else "") + fmt)
 
 
 class _Sums:
@@ -182,8 +170,8 @@ def _interval(sums: _Sums, parts: list, fn, tab: dict | None = None):
 
 def _text(tab, metric, label: str, iv) -> str:
     pp = " p.p." if tab["metrics"][metric].get("format") == "pct" else ""
-    return (f"{label} {_num(tab, metric, iv.value, True)}{pp} "
-            f"[{_num(tab, metric, iv.low, True)}, {_num(tab, metric, iv.high, True)}]")
+    low, high = (format_value(tab, metric, v, True) for v in (iv.low, iv.high))
+    return f"{label} {format_value(tab, metric, iv.value, True)}{pp} [{low}, {high}]"
 
 
 def _relation(rel: str, margin: float):
@@ -214,8 +202,8 @@ def _finding(tab, f, sums: _Sums, have) -> tuple:
                                            (b1, m, False)],
                        lambda v: sign * (v[2] - v[3]) - sign * (v[0] - v[1]), 1))
     elif k == "at_least":
-        pieces.append((f"{f['row']} − {_num(tab, m, f['value'])}", [(f["row"], m, False)],
-                       lambda v: v[0] - f["value"], 1))
+        pieces.append((f"{f['row']} − {format_value(tab, m, f['value'])}",
+                       [(f["row"], m, False)], lambda v: v[0] - f["value"], 1))
     elif k == "fails":
         base = "f1_constant" if f.get("baseline") == "constant" else m
         margin = f.get("margin", 0.0)
@@ -242,7 +230,7 @@ def _finding(tab, f, sums: _Sums, have) -> tuple:
         lo, hi = f["report"] - tol, f["report"] + tol
         agrees = first.high >= lo and first.low <= hi
         ours += (f"; size {'agrees with' if agrees else 'differs from'} the report's "
-                 f"{_num(tab, m, f['report'])} ± {_num(tab, m, tol)}")
+                 f"{format_value(tab, m, f['report'])} ± {format_value(tab, m, tol)}")
     return ours, U.combine_marks(marks), first
 
 
@@ -262,93 +250,3 @@ def evaluate_findings(tab: dict, res: dict) -> list:
                     "interval": None if iv is None else [iv.low, iv.high],
                     "recordings": None if iv is None else iv.n})
     return out
-
-
-# ---------------------------------------------------------------------- output
-def _cell(tab, m, r) -> str:
-    mean, std, iv = r["metrics"].get(m), r["std"].get(m), r["interval"].get(m)
-    text = _num(tab, m, mean)
-    if std is not None:
-        text += f" ± {_num(tab, m, std)}"
-    if iv and not any(math.isnan(x) for x in iv):
-        text += f" [{_num(tab, m, iv[0])}, {_num(tab, m, iv[1])}]"
-    return text
-
-
-def _md(header, rows) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    return "\n".join(lines + ["| " + " | ".join(str(c) for c in r) + " |" for r in rows])
-
-
-def format_table(tab: dict, res: dict, findings: list) -> str:
-    """Markdown: cells ``mean ± std [95 % interval]``, the report's values, the trivial
-    baseline, epochs per seed; then the findings with their difference, interval, mark."""
-    from .table_files import settings_cells, table_header
-
-    from .cost_columns import COST_HEADER, cost_cells
-
-    header, metrics, reported, settings = table_header(tab, "epochs (best/run) per seed")
-    header += COST_HEADER
-    rows = []
-    for row in tab["rows"]:
-        r = res["results"].get(row["name"])
-        if r is None:
-            continue
-        cells = [row["name"], row.get("label", row["name"])]
-        if settings:
-            cells += settings_cells(r)
-        cells += [_cell(tab, m, r) for m in metrics]
-        cells += [_num(tab, m, (row.get("report") or {}).get(m)) for m in reported]
-        cells.append(_num(tab, metrics[0], r["initial"].get(metrics[0])))
-        trained = r.get("source") != "initial"
-        cells.append("–" if not trained else ", ".join(
-            f"{s['best_epoch']}/{s['epochs']}" for s in r["seeds"].values()))
-        cells += cost_cells([s.get("run") for s in r["seeds"].values()],
-                            [s.get("seconds") for s in r["seeds"].values()]) if trained \
-            else ["–"] * len(COST_HEADER)
-        rows.append(cells)
-    n = len(res.get("seeds") or [])
-    split = "seed varied with the seed" if res.get("split_seeds") else "fixed"
-    text = [f"### {tab['title']} — budget {res['budget']}, {n} seeds (split {split})", "",
-            "Cells: mean ± std over seeds [95 % interval of the mean, bootstrap over test "
-            "recordings resampled jointly for every seed"
-            + ("; with split seeds, of the ratio pooled over seeds" if res.get("split_seeds")
-               else "") + "]. "
-            f"Rule: {tab.get('budget_rule', '').strip()}", "", _md(header, rows), "",
-            _md(["finding (report)", "ours: difference [95 % interval]", "report", "status"],
-                [[f["text"], f["ours"], f["report"], f["status"]] for f in findings])]
-    return "\n".join(text) + "\n"
-
-
-def main_seeds(tab: dict, ns, rows, overrides) -> int:
-    """``bsp-reproduce ... --seeds N``: trains, prints the table, writes ``results.md``,
-    ``results.json`` (per-seed values, intervals, marks), ``curves.png`` and the table's
-    ``figures``."""
-    from ..atomic import write_text
-    from .figures import draw_figures
-    from .seeds import learning_curves, reproduce_seeds
-
-    res = reproduce_seeds(tab, ns.data, ns.budget, ns.out, seeds=ns.seeds,
-                          split_seeds=ns.split_seeds, jobs=ns.jobs, rows=rows,
-                          overrides=overrides, force=ns.force, quiet=not ns.verbose,
-                          dry_run=ns.dry_run)
-    if ns.dry_run:
-        return 0
-    summarise(tab, res)
-    found = evaluate_findings(tab, res)
-    text = format_table(tab, res, found)
-    print(text)
-    base = Path(res["dir"])
-    curves = learning_curves(tab, res)
-    figures = draw_figures(tab, res)  # the table's own figures (``figures:``)
-    write_text(base / "results.md", text)
-    write_text(base / "results.json", json.dumps({**res, "findings": found,
-                                                  "figures": [str(f) for f in figures]},
-                                                 indent=1, default=str))
-    if ns.breakdown:
-        from .table_breakdown import table_breakdown
-
-        figures += table_breakdown(tab, res, ns.force)
-    print(f"wrote {base / 'results.md'}" + (f" and {curves}" if curves else "")
-          + "".join(f", {f}" for f in figures))
-    return 0

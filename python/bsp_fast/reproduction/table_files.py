@@ -15,9 +15,9 @@ import os
 import re
 from pathlib import Path
 
-from . import config as C
+from ..training import config as C
 from .figures import check_figures
-from .tasks import get_task
+from ..training.tasks import get_task
 
 __all__ = ["wanted_rows", "table_header", "settings_cells", "TABLES", "BUDGETS", "KINDS",
            "RELATIONS", "RULE_KEYS", "experiments_dirs", "experiments_dir", "load_table",
@@ -117,6 +117,7 @@ def load_table(table) -> dict:
         task = get_task(doc["task"])
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
+    doc["metrics"] = metric_specs(task, doc["metrics"], path)
     names = [r["name"] for r in doc["rows"]]
     for r in doc["rows"]:
         extra = r.get("budgets") or {}
@@ -152,6 +153,46 @@ def load_table(table) -> dict:
     check_budget_rule(doc)
     check_figures(doc)
     return doc
+
+
+def _registry(task) -> dict:
+    """``{key: Metric}`` a table of ``task`` may name: the task's metrics, its extra ones,
+    the normaliser fallback share and each metric scored on noisy boxes (``KEY_noisy``)."""
+    from ..training.tasks.base import NORMALISER_FALLBACK
+
+    known = {m.key: m for m in (*task.metrics, *task.extra_metrics, NORMALISER_FALLBACK)}
+    for m in list(known.values()):
+        known[f"{m.key}_noisy"] = type(m)(f"{m.key}_noisy", f"{m.label} noisy boxes", m.unit,
+                                          m.better, m.fmt)
+    return known
+
+
+def metric_specs(task, named, path) -> dict:
+    """The table's metrics as ``{key: {"label", "better", "format"}}``, from the task
+    registry: a table file names its metrics (a list, or a mapping whose entries may give
+    only a ``label`` of the table's own); direction and format are the task's, and a file
+    that states them otherwise is refused."""
+    known = _registry(task)
+    items = {k: None for k in named} if isinstance(named, list) else named
+    if not isinstance(items, dict) or not items:
+        raise ValueError(f"{path}: metrics must be a non-empty list of metric names (or a "
+                         "mapping of names to {label: ...})")
+    out = {}
+    for key, own in items.items():
+        m = known.get(key)
+        if m is None:
+            raise ValueError(f"{path}: metric {key!r} is not one that task {task.name!r} "
+                             f"scores; allowed: {', '.join(known)}")
+        own = own or {}
+        if not isinstance(own, dict) or set(own) - {"label", "better", "format"}:
+            raise ValueError(f"{path}: metric {key!r}: only a label may be given, got {own!r}")
+        for field, value in (("better", m.better), ("format", m.fmt)):
+            if field in own and own[field] != value:
+                raise ValueError(f"{path}: metric {key!r}: {field} {own[field]!r} differs from "
+                                 f"the task registry's {value!r} (training/tasks/); leave it "
+                                 "out, the registry's is used")
+        out[key] = {"label": own.get("label", m.header), "better": m.better, "format": m.fmt}
+    return out
 
 
 def row_data(data, row: dict) -> str:
@@ -208,7 +249,7 @@ def prepare_row_data(table: dict, row: dict, opts: dict, convert: bool = True) -
         return opts
     if want == "mask" or (not convert and not data.is_dir()):
         return opts
-    from .train import make_datamodule, prepare_data
+    from ..training.train import make_datamodule, prepare_data
 
     dm = make_datamodule(C.defaults() | opts)
     dm.convert_options["crop_box"] = want

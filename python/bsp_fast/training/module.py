@@ -18,8 +18,8 @@ from pathlib import Path
 import lightning.pytorch as pl
 import torch
 
-from ..scoring import TaskMetrics
-from . import TASKS, get_task
+from .scoring import TaskMetrics
+from .tasks import TASKS, get_task
 
 __all__ = ["TaskModule", "ClassificationTask", "AutoencoderTask", "LiftingTask",
            "PoseEstimationTask", "TASK_MODULES", "load_module", "checkpoint_info",
@@ -46,7 +46,7 @@ class TaskModule(pl.LightningModule):
         super().__init__()
         if task is not None and task != self.task:
             raise ValueError(f"{type(self).__name__} trains task {self.task!r}, not {task!r}")
-        from ... import models
+        from .. import models
 
         self.spec = get_task(self.task)
         self.net = models.create(self.task, model, **dict(hparams or {}))
@@ -61,7 +61,7 @@ class TaskModule(pl.LightningModule):
         self.val_metrics = TaskMetrics(self.task)
         self.test_metrics = TaskMetrics(self.task)
         self.results: dict = {}  # the last computed {"val": {...}, "test": {...}}
-        from ..breakdown import RecordingBreakdown
+        from .per_recording import RecordingBreakdown
 
         self.test_recordings = RecordingBreakdown(self.task)  # -> test_per_recording.json
 

@@ -1,0 +1,109 @@
+"""``bsp-reproduce TABLE --data DATASET_DIR``: runs every row of one of the report's tables
+(``experiments/TABLE.yaml``) through :func:`bsp_fast.train` (:mod:`.runner`), then prints
+our numbers next to the report's and marks each of the report's findings (orderings,
+effect directions) as reproduced, not reproduced or inconclusive, computed from the
+numbers (:mod:`.report`). See docs/reproduce.md.
+
+A table file holds ``common`` options, ``budgets`` (smoke / quick / full option sets),
+``rows`` (a name, a label, the row's own options, optionally the report's values) and
+``findings``. Each run's resolved options are written as a plain ``bsp-train --config``
+file (``OUT/TABLE-BUDGET/configs/ROW.yaml``) and the run is trained from that file.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..training import config as C
+from ..training.runs import RunError
+from .runner import add_options, run_table
+from .table_files import BUDGETS, load_table, table_names
+
+__all__ = ["build_parser", "main"]
+
+
+# ---------------------------------------------------------------------- CLI
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="bsp-reproduce",
+        description="Run every row of one of the report's tables (experiments/TABLE.yaml) with "
+                    "bsp-train, then print our table beside the report's numbers with each of the "
+                    "report's findings marked reproduced / not reproduced (from the numbers).",
+        epilog="tables: " + ", ".join(table_names()) + ". Budgets: smoke (1 epoch, 2 batches: plumbing "
+               "only), quick (2-core CPU on bsp-synth data; costs in each table file), full (the "
+               "report's epochs, GPU). Exit codes: 0 done, 1 a run failed or bad data, 2 bad "
+               "arguments. docs: docs/reproduce.md")
+    p.add_argument("table", metavar="TABLE", nargs="?",
+                   help="table name (installed with bsp_fast) or path to a table YAML")
+    p.add_argument("--table", dest="table_file", metavar="FILE.yaml",
+                   help="your own table file instead of TABLE (docs/reproduce.md, table files)")
+    p.add_argument("--data", required=True, metavar="DATASET_OR_H5",
+                   help="CARLA-BSP dataset directory (e.g. from bsp-synth) or a bsp-convert "
+                        "HDF5 file")
+    p.add_argument("--budget", default="quick", choices=BUDGETS,
+                   help="option set of the table file to train with (default: quick)")
+    p.add_argument("--out", default="runs", metavar="DIR",
+                   help="runs go to DIR/TABLE-BUDGET/ROW, configs to DIR/TABLE-BUDGET/configs "
+                        "(default: runs)")
+    p.add_argument("--rows", metavar="A,B", help="only these rows (comma-separated names)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a bsp-train option for every row (repeatable; YAML values), "
+                        "e.g. --set workers=2 --set accelerator=gpu")
+    p.add_argument("--force", action="store_true",
+                   help="train rows again even when their run directory has metrics.json "
+                        "(default: reuse finished rows)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="write the per-row bsp-train configs and print the commands only")
+    p.add_argument("--verbose", action="store_true", help="bsp-train's progress bars and tables")
+    p.add_argument("--breakdown", action="store_true",
+                   help="also the test breakdown of every row (bsp-eval --breakdown: per joint, "
+                        "size or distance bin, profile, missing joints), mean ± std over seeds: "
+                        "breakdown.md, breakdown.json and bar figures beside results.md")
+    add_options(p)  # --seeds, --split-seeds, --jobs
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    ns = parser.parse_args(argv)
+    if (ns.table is None) == (ns.table_file is None):
+        parser.error("give a TABLE name or --table FILE.yaml (one of them)")
+    if ns.table_file is not None and Path(ns.table_file).suffix not in (".yaml", ".yml"):
+        parser.error(f"--table {ns.table_file}: a table file ends in .yaml or .yml")
+    from ..training.lifecycle import Interrupted, signals
+    from .report import write_report
+
+    try:
+        tab = load_table(ns.table or ns.table_file)
+        overrides = C.parse_hp(ns.set)
+        rows = [r.strip() for r in ns.rows.split(",") if r.strip()] if ns.rows else None
+        seeds = None if ns.seeds == 1 and not ns.split_seeds else ns.seeds
+        # SIGTERM/SIGINT: Interrupted here; the runs in worker processes get SIGTERM and
+        # save, a run in this process saves at the end of its batch
+        with signals():
+            res = run_table(tab, ns.data, ns.budget, ns.out, seeds=seeds,
+                            split_seeds=ns.split_seeds, jobs=ns.jobs, rows=rows,
+                            overrides=overrides, force=ns.force, quiet=not ns.verbose,
+                            dry_run=ns.dry_run)
+            if not ns.dry_run:
+                write_report(tab, res, breakdown=ns.breakdown, force=ns.force)
+    except Interrupted as exc:
+        print(f"bsp-reproduce: interrupted ({exc}); finished rows are kept and reused, an "
+              "interrupted row continues where it stopped when the same command is run "
+              "again", file=sys.stderr)
+        return exc.code
+    except (C.ConfigError, ValueError) as exc:
+        print(f"bsp-reproduce: {exc}", file=sys.stderr)
+        return 2
+    except RunError as exc:
+        print(f"bsp-reproduce: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("bsp-reproduce: interrupted (finished rows are kept and reused)", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
