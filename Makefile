@@ -3,6 +3,8 @@
 # make test: install everything, build, run the C++ (ctest) and Python (pytest) tests.
 # make test-asan / test-tsan / fuzz FUZZ_SECONDS=N: sanitizer builds and the fuzzers
 # (docs/security.md, "Fuzzing and sanitizers"), each in its own build directory.
+# make wheel: a self-contained manylinux wheel in dist/ (docs/install.md); make wheel-check:
+# that wheel installed and run on an emulated machine without compilers (CI runs it).
 SHELL := /bin/bash
 PY = $$(cat build/.python)
 WERROR ?= OFF
@@ -10,7 +12,7 @@ WERROR ?= OFF
 TESTS ?= OFF
 
 .PHONY: all deps install test test-cpp test-python demo bench clean \
-	fuzz fuzz-build test-asan test-asan-cpp test-tsan
+	fuzz fuzz-build test-asan test-asan-cpp test-tsan wheel wheel-check
 all: install
 
 deps:
@@ -31,6 +33,15 @@ test-cpp:
 
 test-python:
 	$(PY) -m pytest -q tests/python
+
+# ---------------------------------------------------------------- wheels
+# The binary wheel, built in build/wheel like `install` (after it nothing recompiles), then
+# repaired by auditwheel: every shared library the core needs is copied into the wheel.
+wheel: deps
+	@bash tools/build_wheel.sh $(PY)
+
+wheel-check: deps
+	@bash tools/wheel_check.sh "" $(PY)
 
 # ---------------------------------------------------------------- sanitizers and fuzzing
 # Builds in build/asan, build/tsan and build/fuzz with their own flags; build/wheel (the

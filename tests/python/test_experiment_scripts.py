@@ -50,3 +50,26 @@ def test_normaliser_stats_smoke(clips, tmp_path):
     assert abs(shares[1] - 0.75) < 0.1 and shares[2] > 0.95
     # the noise is the same share of the direct scale whatever the MJP (same frames' sizes)
     assert rows[(5.0, 0.0)]["direct_noise_over_scale_median"] > 0
+
+
+def test_redraw_shift_smoke(clips, tmp_path):
+    """The old, batch-keyed draws move a noisy checkpoint's score with the evaluation batch
+    size; the per-clip draws give one score at every batch size."""
+    import bsp_fast
+
+    run = bsp_fast.train("classification", "lstm", data=clips, out=tmp_path / "run", epochs=1,
+                         batch_size=4, noise=5.0, mjp=0.7187, quiet=True,
+                         hp={"hidden_size": 8, "num_layers": 1})
+    rs = _load("redraw_shift")
+    assert rs.main([str(run.run_dir), "--out", str(tmp_path / "o"), "--batches", "1", "3",
+                    "4", "--metrics", "loss"]) == 0
+    doc = json.loads((tmp_path / "o" / "redraw_shift.json").read_text())
+    (row,) = doc["rows"]
+    m = row["metrics"]["loss"]
+    assert row["own_batch_size"] == 4 and m["old_at_own_batch"] is not None
+    assert m["new_spread"] < 1e-5  # per clip: the batch size changes nothing
+    assert m["old_max"] - m["old_min"] > 1e-4  # batch-keyed: it did
+    assert "| run (batch 4) | loss |" in (tmp_path / "o" / "redraw_shift.md").read_text()
+    # --resume keeps the rows written
+    assert rs.main([str(run.run_dir), "--out", str(tmp_path / "o"), "--resume"]) == 0
+    assert len(json.loads((tmp_path / "o" / "redraw_shift.json").read_text())["rows"]) == 1

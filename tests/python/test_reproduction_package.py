@@ -84,3 +84,35 @@ def test_smoke_tables_carry_the_banner_and_others_do_not(tmp_path):
                "seeds": seeds, "split_seeds": False, "results": {}}
         text = format_table(tab, res, [])
         assert (SMOKE_BANNER in text) == (budget == "smoke"), (budget, seeds)
+
+
+def test_a_new_bsp_train_option_reaches_eval_predict_and_reproduce(monkeypatch, capsys):
+    """One declaration (training/config.py): bsp-eval, bsp-predict and bsp-reproduce build
+    their overrides from bsp-train's options, with the same help and converter."""
+    from bsp_fast.reproduction import cli as reproduce_cli
+    from bsp_fast.training import config as C, evaluate, predict
+    from bsp_fast.training.overrides import given_overrides
+
+    knob = C.Option("frobnicate_level", "int", 0, "how hard to frobnicate (a test option)",
+                    "training", minimum=0, metavar="N", scoring=True)
+    monkeypatch.setattr(C, "OPTIONS", C.OPTIONS + (knob,))
+    for main in (evaluate.main, predict.main, reproduce_cli.main):
+        with pytest.raises(SystemExit):
+            main(["--help"])
+        out = capsys.readouterr().out
+        assert "--frobnicate-level N" in out and "how hard to frobnicate" in out, main
+    # parsed with the option's own converter and message
+    p = evaluate._parser()
+    ns = p.parse_args(["run", "--frobnicate-level", "3"])
+    assert given_overrides(ns, ns.overrides) == {"frobnicate_level": 3}
+    with pytest.raises(SystemExit):
+        p.parse_args(["run", "--frobnicate-level", "-1"])
+    assert "frobnicate_level must be >= 0" in capsys.readouterr().err
+    # a scoring option absent from the line is no override (the run's value stays)
+    assert given_overrides(p.parse_args(["run"]), ns.overrides) == {}
+    # bsp-reproduce takes every option but the run's identity, for every row
+    rp = reproduce_cli.build_parser()
+    ns = rp.parse_args(["lifting", "--data", "d", "--epochs", "3", "--frobnicate-level", "2"])
+    assert given_overrides(ns, ns.overrides) == {"epochs": 3, "frobnicate_level": 2}
+    flags = {f for a in rp._actions for f in a.option_strings}
+    assert not flags & {"--model", "--resume", "--task", "--seed", "--hp"}

@@ -17,7 +17,6 @@ from __future__ import annotations
 import json
 import re
 import tempfile
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,7 +28,7 @@ from .clipfile import write_clip_file
 from .readers import BadInput, Detections, load_json
 from .safe_pickle import RefusedPickle, load_file
 
-__all__ = ["Track", "parse_xml", "video_size", "window_stride", "import_tracks",
+__all__ = ["Track", "window_stride", "import_tracks",
            "SPLITS", "BENCHMARK"]
 
 SPLITS = ("train", "val", "test")
@@ -60,42 +59,6 @@ class Track:
     where: str
     use: bool = True
     skip: str = ""
-
-
-def parse_xml(path, what: str):
-    """The root element of ``path``; a missing or malformed file is a :class:`BadInput`."""
-    path = Path(path)
-    if not path.is_file():
-        raise BadInput(f"{path}: no such {what} file; nothing written")
-    try:
-        return ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        line, col = exc.position
-        raise BadInput(f"{path}: malformed XML at line {line} column {col + 1}: "
-                       f"{str(exc).split(':')[0]}; nothing written") from None
-
-
-def video_size(root, default=(1920, 1080)) -> tuple:
-    """(width, height) from CVAT's ``meta/task/original_size``, else ``default``."""
-    w, h = root.findtext("./meta/task/original_size/width"), \
-        root.findtext("./meta/task/original_size/height")
-    try:
-        return (int(w), int(h)) if w and h else default
-    except ValueError:
-        return default
-
-
-def box_record(box, where: str) -> tuple:
-    """``(frame, [x1, y1, x2, y2], outside, {attribute: text})`` of a CVAT ``<box>``."""
-    try:
-        frame = int(box.get("frame"))
-        xyxy = [float(box.get(k)) for k in ("xtl", "ytl", "xbr", "ybr")]
-        outside = int(box.get("outside", "0"))
-    except (TypeError, ValueError):
-        raise BadInput(f"{where}: a <box> needs integer 'frame' and numeric 'xtl', 'ytl', "
-                       f"'xbr', 'ybr' (got {dict(box.attrib)}); nothing written") from None
-    attrs = {a.get("name"): (a.text or "").strip() for a in box.findall("./attribute")}
-    return frame, xyxy, outside, attrs
 
 
 def window_stride(overlap: float, obs_length: int) -> int:

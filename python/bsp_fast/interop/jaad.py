@@ -17,8 +17,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .annotation_xml import box_record, crossing_attributes, parse_xml, video_size
 from .benchmark_annotations import (BENCHMARK, SPLITS, OpenPoseFrames, PickledPoses, Track,
-                                    box_record, import_tracks, parse_xml, video_size)
+                                    import_tracks)
 from .readers import BadInput
 
 __all__ = ["read_jaad", "import_jaad", "SUBSETS"]
@@ -50,16 +51,7 @@ def _split_files(root: Path, split_dir) -> tuple:
 
 
 def _attributes(path: Path) -> dict:
-    root = parse_xml(path, "JAAD attributes")
-    out = {}
-    for k, p in enumerate(root.findall("./pedestrian")):
-        pid = p.get("id")
-        try:
-            out[pid] = (int(p.get("crossing")), int(p.get("crossing_point")))
-        except (TypeError, ValueError):
-            raise BadInput(f"{path}: pedestrian[{k}] (id {pid!r}): needs integer 'crossing' "
-                           "and 'crossing_point'; nothing written") from None
-    return out
+    return crossing_attributes(path, "JAAD attributes")
 
 
 def _tracks(path: Path, video: str, subset: str, split) -> list:

@@ -17,8 +17,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .annotation_xml import box_record, crossing_attributes, parse_xml, video_size
 from .benchmark_annotations import (BENCHMARK, OpenPoseFrames, PickledPoses, Track,
-                                    box_record, import_tracks, parse_xml, video_size)
+                                    import_tracks)
 from .readers import BadInput
 
 __all__ = ["SET_SPLIT", "read_pie", "import_pie"]
@@ -29,16 +30,7 @@ SET_SPLIT = {"set01": "train", "set02": "train", "set04": "train",
 
 
 def _attributes(path: Path) -> dict:
-    root = parse_xml(path, "PIE attributes")
-    out = {}
-    for k, p in enumerate(root.findall("./pedestrian")):
-        pid = p.get("id")
-        try:
-            out[pid] = (int(p.get("crossing")), int(p.get("crossing_point")))
-        except (TypeError, ValueError):
-            raise BadInput(f"{path}: pedestrian[{k}] (id {pid!r}): needs integer 'crossing' "
-                           "and 'crossing_point'; nothing written") from None
-    return out
+    return crossing_attributes(path, "PIE attributes")
 
 
 def _tracks(path: Path, attr_path: Path, video: str, split: str) -> list:

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from ..training import config as C
+from ..training.overrides import add_overrides, given_overrides
 from ..training.runs import RunError
 from .runner import add_options, run_table
 from .table_files import BUDGETS, load_table, table_names
@@ -61,6 +62,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "size or distance bin, profile, missing joints), mean ± std over seeds: "
                         "breakdown.md, breakdown.json and bar figures beside results.md")
     add_options(p)  # --seeds, --split-seeds, --jobs
+    # every bsp-train option (its own declaration, training/config.py) for every row, as
+    # --set KEY=VALUE; given here, it wins over a --set of the same key
+    p.set_defaults(overrides=add_overrides(
+        p, "table", "bsp-train options for every row (like --set KEY=VALUE; default: the "
+        "table's)"))
     return p
 
 
@@ -76,7 +82,7 @@ def main(argv=None) -> int:
 
     try:
         tab = load_table(ns.table or ns.table_file)
-        overrides = C.parse_hp(ns.set)
+        overrides = {**C.parse_hp(ns.set), **given_overrides(ns, ns.overrides)}
         rows = [r.strip() for r in ns.rows.split(",") if r.strip()] if ns.rows else None
         seeds = None if ns.seeds == 1 and not ns.split_seeds else ns.seeds
         # SIGTERM/SIGINT: Interrupted here; the runs in worker processes get SIGTERM and

@@ -10,7 +10,10 @@ line (``training.train.resolve_config``; docs/design.md says why ``--config`` is
 
 Adding an option is one entry in ``OPTIONS``: ``_o(name, kind, default, help, group,
 ...)``, where ``kind`` names a converter of ``KINDS`` or is a function ``value -> value``
-that raises :class:`ConfigError` (or ``ValueError``) for a bad value.
+that raises :class:`ConfigError` (or ``ValueError``) for a bad value. The same entry is an
+override of ``bsp-reproduce`` (every option but the run's identity) and, with
+``scoring=True``, of ``bsp-eval`` and ``bsp-predict`` (:mod:`.overrides`): one declaration,
+the same names, types and messages everywhere.
 """
 from __future__ import annotations
 
@@ -52,6 +55,9 @@ class Option:
     choices: tuple = ()
     minimum: float | None = None
     metavar: str | None = None
+    #: also an option of bsp-eval and bsp-predict: how a saved run is scored (its
+    #: input corruption, batches, hardware), not what was trained
+    scoring: bool = False
 
     def convert(self, value):
         """``value`` (a command-line string or a YAML/Python value) as this option's type;
@@ -75,7 +81,7 @@ class Option:
         return value
 
 
-_o = Option  # _o(name, kind, default, help, group, choices=, minimum=, metavar=)
+_o = Option  # _o(name, kind, default, help, group, choices=, minimum=, metavar=, scoring=)
 
 
 OPTIONS: tuple = (
@@ -115,9 +121,9 @@ OPTIONS: tuple = (
        minimum=0),
     _o("noise", "float", 0.0, "Gaussian noise sigma in pixels on the 2D inputs (train, val "
        "and test; val/test noise is fixed by the evaluation seed)", "data", minimum=0.0,
-       metavar="SIGMA"),
+       metavar="SIGMA", scoring=True),
     _o("mjp", "mjp", 0.0, "missing-joint probability of the 2D inputs: one value, or 26 "
-       "comma-separated values (one per joint)", "data", metavar="P[,P...]"),
+       "comma-separated values (one per joint)", "data", metavar="P[,P...]", scoring=True),
     _o("augment", "bool", True, "random flips and rotations of the train clips "
        "(classification and autoencoder only)", "data"),
     _o("box_jitter_scale", "float", 0.0, "pose_estimation: train-time box jitter, crop-box "
@@ -137,15 +143,16 @@ OPTIONS: tuple = (
     _o("max_steps", "int", 0, "maximum number of optimiser updates (0: no cap; --epochs "
        "still applies)", "training", minimum=0, metavar="N"),
     _o("batch_size", "int", 256, "clips per batch (per process with DDP)", "training",
-       minimum=1),
+       minimum=1, scoring=True),
     _o("early_stop", "int", 0, "stop after this many epochs without a better val loss "
        "(0: never)", "training", minimum=0, metavar="EPOCHS"),
     _o("workers", "int", 0, "DataLoader worker processes per training process", "training",
-       minimum=0),
+       minimum=0, scoring=True),
     _o("threads", "int", 0, "torch CPU threads per training process (0: torch's default, "
        "the core count); 1 is often fastest for small models or on a busy machine",
-       "training", minimum=0, metavar="N"),
-    _o("accelerator", "str", "auto", "where to train", "training", choices=ACCELERATORS),
+       "training", minimum=0, metavar="N", scoring=True),
+    _o("accelerator", "str", "auto", "where to train", "training", choices=ACCELERATORS,
+       scoring=True),
     _o("devices", "devices", "auto", "number of devices (processes with DDP) or 'auto' or a "
        "comma-separated list of GPU indices", "training"),
     _o("strategy", "str", "auto", "Lightning strategy (ddp: one process per device; on CPU "
@@ -156,13 +163,13 @@ OPTIONS: tuple = (
     _o("precision", "str", "auto", "arithmetic precision; auto = bf16-mixed on GPUs that "
        "support it and, on CPUs with AVX512-BF16/AMX, for the models measured faster in "
        "bf16 there; 32 otherwise (see docs/training.md for the measurements)", "training",
-       choices=PRECISIONS),
+       choices=PRECISIONS, scoring=True),
     _o("checkpoint_every", "str", "10m", "also save checkpoints/last.ckpt every this long "
        "within an epoch (e.g. 10m, 90s, 1h; 0: at epoch ends only), so a killed run "
        "resumes near where it stopped (--resume)", "training", metavar="DURATION"),
     _o("limit_batches", "int", 0, "use at most this many batches of each split per epoch "
        "(0: all; for smoke tests - metrics then cover part of a split)", "training",
-       minimum=0, metavar="N"),
+       minimum=0, metavar="N", scoring=True),
     _o("logger", "str", "csv", "CSV logs are always written; tensorboard or wandb (offline) "
        "log as well when installed", "training", choices=LOGGERS),
 )

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import config as C
+from .overrides import add_overrides, given_overrides
 from ..atomic import OutputOverlapError, refuse
 from .runs import RunError, check_run_outputs, read_run, resolve_checkpoint, run_inputs, \
     write_json
@@ -106,7 +107,7 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
              batch_size: int | None = None, workers: int | None = None,
              accelerator: str | None = None, noise: float | None = None, mjp=None,
              limit_batches: int | None = None, quiet: bool = True,
-             box_noise=None, callbacks=()) -> EvalResult:
+             box_noise=None, callbacks=(), **overrides) -> EvalResult:
     """Scores the ``which`` checkpoint (best or last) of run directory or checkpoint
     ``run`` on ``split`` (test or val) with the run's data settings (the evaluation noise
     is fixed per clip), any of them overridable; reproduces the run's
@@ -122,7 +123,7 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
 
     module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size, workers=workers,
                                      accelerator=accelerator, noise=noise, mjp=mjp,
-                                     quiet=quiet)
+                                     quiet=quiet, **overrides)
     cfg["limit_batches"] = limit_batches or 0  # the whole split unless asked here
     precision = prepare_scoring(cfg, module)
     dm = make_datamodule(cfg, h5)
@@ -237,25 +238,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--data", default=None, metavar="DATASET_OR_H5",
                    help="data to evaluate on (default: the run's dataset folder, else its "
                         "HDF5 file)")
-    p.add_argument("--batch-size", type=int, default=None,
-                   help="clips per batch (default: the run's; the scores do not depend "
-                        "on it: every clip's evaluation noise is fixed per clip)")
-    p.add_argument("--workers", type=int, default=None, help="DataLoader worker processes")
-    p.add_argument("--accelerator", default=None, choices=C.ACCELERATORS,
-                   help="where to run (default: the run's)")
-    p.add_argument("--noise", type=float, default=None, metavar="SIGMA",
-                   help="override the run's input noise (pixels)")
-    p.add_argument("--mjp", default=None, metavar="P[,P...]",
-                   help="override the run's missing-joint probability (1 or 26 values)")
-    p.add_argument("--limit-batches", type=int, default=None, metavar="N",
-                   help="evaluate at most N batches (default: the whole split, whatever "
-                        "the run trained with)")
     p.add_argument("--box-noise", default=None, metavar="SCALE,SHIFT", type=_box_noise,
                    help="pose_estimation: score crops of noisy boxes, side x U[1-SCALE, "
                         "1+SCALE] and centre moved by U[-SHIFT, SHIFT] x side (e.g. 0.1,0.05), "
                         "seeded per clip; needs a file with context crops")
     p.add_argument("--json", default=None, metavar="FILE", help="also write the metrics here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    # how the run is scored: bsp-train's own declarations (training/config.py, scoring=True)
+    p.set_defaults(overrides=add_overrides(p, "scoring"))
     return p
 
 
@@ -280,10 +270,8 @@ def main(argv=None) -> int:
         if args.breakdown:
             return _print_breakdown(args)
         res = evaluate(args.runs[0], args.split, args.data, which=args.which,
-                       batch_size=args.batch_size, workers=args.workers,
-                       accelerator=args.accelerator, noise=args.noise, mjp=args.mjp,
-                       limit_batches=args.limit_batches, quiet=args.quiet,
-                       box_noise=args.box_noise)
+                       quiet=args.quiet, box_noise=args.box_noise,
+                       **given_overrides(args, args.overrides))
     except OutputOverlapError as exc:  # --json is an input, --force or not
         return refuse("bsp-eval", exc)
     except (C.ConfigError, ValueError) as exc:
@@ -298,7 +286,8 @@ def main(argv=None) -> int:
         write_json(doc, args.json)
     print(f"{res.task} / {res.model}: {res.split} metrics of {res.checkpoint}")
     print(f"  scored {res.clips} clips of {res.recordings} recordings"
-          + (f" (--limit-batches {args.limit_batches})" if args.limit_batches else ""))
+          + (f" (--limit-batches {args.limit_batches})"
+             if getattr(args, "limit_batches", None) else ""))
     for key, value in res.metrics.items():
         print(f"  {key:14s} {value:.6g}")
     return 0
@@ -327,10 +316,8 @@ def _print_breakdown(args) -> int:
     if args.split != "test":
         raise C.ConfigError("--breakdown scores the test split; leave out --split")
     doc = breakdown(args.runs[0], args.data, which=args.which, save=args.save,
-                    batch_size=args.batch_size, workers=args.workers,
-                    accelerator=args.accelerator, noise=args.noise, mjp=args.mjp,
-                    limit_batches=args.limit_batches, quiet=args.quiet,
-                    box_noise=args.box_noise)
+                    quiet=args.quiet, box_noise=args.box_noise,
+                    **given_overrides(args, args.overrides))
     if args.json:
         write_json({"task": doc["task"], "model": doc["model"], "split": "test",
                     "checkpoint": doc["checkpoint"], "test": doc["metrics"]}, args.json)

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from . import config as C
+from .overrides import add_overrides, given_overrides
 from ..atomic import OutputOverlapError, atomic_output, refuse
 from .runs import RunError, check_run_outputs, run_inputs
 
@@ -108,7 +109,7 @@ def _progress_bar():
 def predict(run, out, data=None, *, split: str = "test", which: str = "best",
             batch_size: int | None = None, workers: int | None = None,
             accelerator: str | None = None, noise: float | None = None, mjp=None,
-            force: bool = False, progress: bool = False) -> PredictResult:
+            force: bool = False, progress: bool = False, **overrides) -> PredictResult:
     """Writes the predictions of run directory or checkpoint ``run`` for ``split`` of its
     data (or ``data``) to the HDF5 file ``out`` (temporary name, renamed when complete;
     an existing file needs ``force``). The model runs as ``bsp-eval`` scores it (the run's
@@ -137,7 +138,7 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
         raise RunError(f"{out} exists; pass --force to overwrite it", code=3)
     module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size,
                                      workers=workers, accelerator=accelerator, noise=noise,
-                                     mjp=mjp)
+                                     mjp=mjp, **overrides)
     if cfg["accelerator"] == "gpu" and not torch.cuda.is_available():
         raise C.ConfigError("--accelerator gpu: no CUDA device available" if accelerator else
                             f"{ckpt}: the run used --accelerator gpu and no CUDA device is "
@@ -158,7 +159,8 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
              "units": module.spec.prediction_units}
     writer = _writer(out, force, attrs)
     # the precision bsp-eval scores in; the whole split, whatever the run's --limit-batches
-    trainer = make_trainer(dict(cfg, quiet=not progress, limit_batches=0), None, precision,
+    limit = overrides.get("limit_batches") or 0  # the whole split unless asked here
+    trainer = make_trainer(dict(cfg, quiet=not progress, limit_batches=limit), None, precision,
                            fit=False,
                            callbacks=[writer] + ([_progress_bar()] if progress else []))
     # the writer needs no sampler indices (the clips carry their row)
@@ -188,20 +190,15 @@ def main(argv=None) -> int:
     p.add_argument("--split", default="test", choices=("test", "val"))
     p.add_argument("--which", default="best", choices=("best", "last"),
                    help="checkpoint of a run directory")
-    p.add_argument("--batch-size", type=int, default=None, help="default: the run's")
-    p.add_argument("--workers", type=int, default=None, help="DataLoader worker processes")
-    p.add_argument("--accelerator", default=None, choices=C.ACCELERATORS,
-                   help="where to run (default: the run's)")
-    p.add_argument("--noise", type=float, default=None, help="override the run's input noise")
-    p.add_argument("--mjp", default=None, help="override the run's missing-joint probability")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    # how the run is scored: bsp-train's own declarations (training/config.py, scoring=True)
+    names = add_overrides(p, "scoring")
     args = p.parse_args(list(sys.argv[1:] if argv is None else argv))
     try:
         res = predict(args.run, args.out, args.data, split=args.split, which=args.which,
-                      batch_size=args.batch_size, workers=args.workers,
-                      accelerator=args.accelerator, noise=args.noise, mjp=args.mjp,
-                      force=args.force, progress=not args.quiet)
+                      force=args.force, progress=not args.quiet,
+                      **given_overrides(args, names))
     except OutputOverlapError as exc:  # --out is an input, --force or not
         return refuse("bsp-predict", exc)
     except (C.ConfigError, ValueError) as exc:
