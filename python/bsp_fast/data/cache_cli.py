@@ -81,8 +81,11 @@ def _options(settings) -> str:
     return " ".join(w for w in words if w)
 
 
-def list_folder(folder: Path, out=sys.stdout) -> tuple:
-    """Prints one cache folder; returns (files, bytes)."""
+def list_folder(folder: Path, out=None) -> tuple:
+    """Prints one cache folder (to ``out``, default the current ``sys.stdout``, looked up
+    at the call: a default bound at import would keep a replaced stream); returns
+    (files, bytes)."""
+    out = sys.stdout if out is None else out
     entries = C.cache_entries(folder)
     total = sum(e["bytes"] for e in entries)
     print(f"{folder}: {len(entries)} file(s), {C.format_bytes(total)}", file=out)
