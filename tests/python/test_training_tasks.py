@@ -62,6 +62,37 @@ def test_reproduce_findings_use_the_task_baselines(tmp_path):
         R.load_table(bad)
 
 
+def test_breakdown_choices_are_task_declarations():
+    """bsp-eval --breakdown asks the task object (issue 35): every task declares what is
+    kept and binned, and eval_breakdown.py names no task."""
+    import ast
+
+    from bsp_fast.training import eval_breakdown as EB
+
+    expected = {"classification": ("logits", "pixel_height", True, True),
+                "autoencoder": ("pose_pairs", "pixel_height", False, True),
+                "lifting": ("joint_error_mm", "camera_distance", False, True),
+                "pose_estimation": ("pose_pairs", "pixel_height", False, False)}
+    for name, task in T.TASKS.items():
+        got = (task.breakdown_scores, task.breakdown_bins, task.breakdown_per_clip,
+               task.breakdown_missing_joints)
+        assert got == expected[name], name
+        assert task.breakdown_scores in EB.SCORES
+        assert task.breakdown_bins in ("pixel_height", "camera_distance")
+    assert T.Task.breakdown_scores == ""  # a new task declares its own
+    source = Path(EB.__file__).read_text(encoding="utf-8")
+    tree = ast.parse(source)
+    docstrings = {id(n.body[0].value) for n in ast.walk(tree)
+                  if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef))
+                  and n.body and isinstance(n.body[0], ast.Expr)}
+    strings = [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
+               and isinstance(n.value, str) and id(n) not in docstrings]
+    for name in T.TASKS:  # not as a literal, nor inside any string but the docstrings
+        assert f'"{name}"' not in source and f"'{name}'" not in source, name
+        assert not [s for s in strings if name in s], name
+    assert "spec.name ==" not in source and "task ==" not in source
+
+
 # ---------------------------------------------------------------------- curves.png
 LOGS = {"train/loss": {0: 3.0, 1: 2.0, 2: 1.5}, "val/loss": {0: 2.5, 1: 1.0, 2: 1.2},
         "val/pck_0.05": {0: 0.5, 1: 0.75, 2: 0.7}, "val/pckhn_0.1": {0: 0.25, 1: 0.5, 2: 0.5}}

@@ -7,7 +7,9 @@ from the same arrays the task scores (``Lifting.metres``, ``pose_pairs`` of the 
 the classifier's logits). :func:`build_breakdown` then reads what the batches do not hold
 from the clip file (the 2D joint boxes ``targets/bboxes``, the hips in the world and the
 camera transform) and groups. Every table says what its count column counts (clips,
-frames or joints); the counts of each table add up to ``totals`` of the split.
+frames or joints); the counts of each table add up to ``totals`` of the split. What is
+kept, the size bins and the missing-joint table are the task object's choice
+(``Task.breakdown_scores``, ``breakdown_bins``, ``breakdown_missing_joints``).
 
 Bins are fixed (the same rows for every run, so tables compare across runs):
 
@@ -35,6 +37,7 @@ from lightning.pytorch.callbacks import Callback
 from .. import metrics as M
 from ..metrics.threshold_free import positive_scores
 from ..skeleton import HIPS, JOINT_NAMES, NUM_JOINTS
+from .tasks import get_task
 
 __all__ = ["BreakdownCollector", "build_breakdown", "bin_index", "FILE", "HEIGHT_EDGES_PX",
            "DISTANCE_EDGES_M", "MISSING_BINS", "PCK_ALPHA", "TTE_NOTE"]
@@ -47,7 +50,8 @@ MISSING_BINS = ((0, 0), (1, 2), (3, 5), (6, 10), (11, 18), (19, 25), (26, 26))
 PCK_ALPHA = 0.05
 TTE_NOTE = ("no time-to-event table: the clip file does not store the benchmark windows' "
             "event frame (docs/hdf5-schema.md)")
-TWO_D = ("autoencoder", "pose_estimation")
+#: the values of ``Task.breakdown_scores`` this module collects and groups
+SCORES = ("logits", "joint_error_mm", "pose_pairs")
 
 
 class BreakdownCollector(Callback):
@@ -81,7 +85,10 @@ class BreakdownCollector(Callback):
         L = batch["inputs"].shape[1]
         sl = spec.scored_frames(net, L)
         part["frames"] = (sl.start or 0, L if sl.stop is None else sl.stop)
-        if spec.name == "classification":
+        if spec.breakdown_scores not in SCORES:
+            raise ValueError(f"task {spec.name!r} has no breakdown (breakdown_scores "
+                             f"{spec.breakdown_scores!r}, not one of {list(SCORES)})")
+        if spec.breakdown_scores == "logits":
             part["score"] = np.asarray(positive_scores(out.cpu().numpy()))
             part["pred"] = M.predicted_labels(out).cpu().numpy()
             part["label"] = batch["label"].cpu().numpy()
@@ -89,7 +96,7 @@ class BreakdownCollector(Callback):
             part["missing"] = torch.round(missing).long().cpu().numpy()
             self.parts.append(part)
             return
-        if spec.name == "lifting":
+        if spec.breakdown_scores == "joint_error_mm":
             pred_m, gt_m = spec.metres(out, batch, net)
             d = (pred_m * 1000.0).double() - (gt_m * 1000.0).double()  # as MPJPE scores it
             part["err"] = torch.sqrt((d * d).sum(-1)).cpu().numpy()  # (B, Ls, 26) mm
@@ -97,7 +104,7 @@ class BreakdownCollector(Callback):
             pred, gt, present = spec.pose_pairs(out, batch, net)
             part.update(pred=pred.cpu().numpy(), gt=gt.cpu().numpy(),
                         present=present.bool().cpu().numpy())
-        if not spec.image_inputs:
+        if spec.breakdown_missing_joints:
             vis = batch["visible"][:, sl].bool()
             part["missing"] = (~vis).sum(-1).cpu().numpy()  # (B, Ls)
         self.parts.append(part)
@@ -218,13 +225,15 @@ def build_breakdown(collector: BreakdownCollector, task: str, metrics: dict | No
     h5_path = h5_path or collector.h5_path
     rows = np.concatenate([p["row"] for p in parts])
     profiles = [s for p in parts for s in p["profile"]]
-    per_frame = _per_frame_values(h5_path, rows, need_distance=task == "lifting")
+    spec = get_task(task)
+    per_frame = _per_frame_values(h5_path, rows,
+                                  need_distance=spec.breakdown_bins == "camera_distance")
     notes, bins = [], {}
-    if task == "classification":
+    if spec.breakdown_per_clip:
         doc = _classification(parts, rows, profiles, per_frame, bins)
         notes.append(TTE_NOTE)
     else:
-        doc = _frame_tables(task, parts, profiles, per_frame, bins, notes)
+        doc = _frame_tables(spec, parts, profiles, per_frame, bins, notes)
     doc.update(task=task, split="test", cost=dict(collector.cost), bins=bins, notes=notes,
                metrics=dict(metrics or {}))
     return doc
@@ -261,7 +270,7 @@ def _classification(parts, rows, profiles, per_frame, bins) -> dict:
             "summary_count": "clips"}
 
 
-def _frame_tables(task, parts, profiles, per_frame, bins, notes) -> dict:
+def _frame_tables(spec, parts, profiles, per_frame, bins, notes) -> dict:
     N = sum(len(p["row"]) for p in parts)
     # per-clip values of the clip file cut to each clip's scored frames
     pos, height, distance = 0, [], []
@@ -275,7 +284,7 @@ def _frame_tables(task, parts, profiles, per_frame, bins, notes) -> dict:
     height = np.concatenate(height)
     profile = _clip_to_frames(parts, profiles)
     F = len(height)
-    if task == "lifting":
+    if spec.breakdown_scores == "joint_error_mm":
         err = _frames(parts, "err")  # (F, 26) mm
 
         def stats(mask):
@@ -287,13 +296,6 @@ def _frame_tables(task, parts, profiles, per_frame, bins, notes) -> dict:
         joint_cols = {"mpjpe_mm": "MPJPE (mm)"}
         total_joints = F * NUM_JOINTS
         summary = _lifting_stats(err)
-        dist = np.concatenate(distance)
-        d_labels = [_edges_label(a, b, "m") for a, b in zip(DISTANCE_EDGES_M,
-                                                            DISTANCE_EDGES_M[1:])]
-        bins["distance_m"] = {"rows": d_labels,
-                              "per": "frame (hips' depth along the camera's forward axis)"}
-        size_table = _table("per camera distance", "distance", "frames", cols,
-                            _grouped(d_labels, bin_index(dist, DISTANCE_EDGES_M), stats), F)
     else:
         pred, gt, present = _frames(parts, "pred"), _frames(parts, "gt"), \
             _frames(parts, "present")
@@ -312,6 +314,15 @@ def _frame_tables(task, parts, profiles, per_frame, bins, notes) -> dict:
         joint_cols = {"pck_0.05": "PCK@0.05 (%)"}
         summary = _pck_stats(pred, gt, present)
         total_joints = summary["joints"]
+    if spec.breakdown_bins == "camera_distance":
+        dist = np.concatenate(distance)
+        d_labels = [_edges_label(a, b, "m") for a, b in zip(DISTANCE_EDGES_M,
+                                                            DISTANCE_EDGES_M[1:])]
+        bins["distance_m"] = {"rows": d_labels,
+                              "per": "frame (hips' depth along the camera's forward axis)"}
+        size_table = _table("per camera distance", "distance", "frames", cols,
+                            _grouped(d_labels, bin_index(dist, DISTANCE_EDGES_M), stats), F)
+    else:
         h_labels = [_edges_label(a, b, "px") for a, b in zip(HEIGHT_EDGES_PX,
                                                              HEIGHT_EDGES_PX[1:])]
         bins["height_px"] = {"rows": h_labels,
@@ -323,7 +334,7 @@ def _frame_tables(task, parts, profiles, per_frame, bins, notes) -> dict:
     prof, prof_idx = np.unique(profile.astype(str), return_inverse=True)
     tables.append(_table("per age/gender profile", "profile", "frames", cols,
                          _grouped(prof, prof_idx, stats), F))
-    if task in ("lifting", "autoencoder"):
+    if spec.breakdown_missing_joints:
         missing = _frames(parts, "missing")
         bins["missing_joints"] = {"rows": _missing_labels(),
                                   "per": "frame (joints missing from the input)"}
@@ -331,7 +342,7 @@ def _frame_tables(task, parts, profiles, per_frame, bins, notes) -> dict:
                              cols, _grouped(_missing_labels(), _missing_index(missing),
                                             stats), F))
     else:
-        notes.append("no missing-joint table: pose_estimation's inputs are crops, not 2D "
+        notes.append(f"no missing-joint table: {spec.name}'s inputs are crops, not 2D "
                      "joints with missing ones")
     summary_cols = {k: v for k, v in cols.items() if k != "joints"} | {"joints": "joints"}
     return {"totals": {"clips": N, "frames": F, "joints": int(total_joints)},

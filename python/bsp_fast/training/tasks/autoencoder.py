@@ -19,6 +19,7 @@ class Autoencoder(Task):
     curves = ("pck_0.05", "pckhn_0.1")
     deformed_inputs = True
     augments = True
+    breakdown_scores = "pose_pairs"
 
     def metric_modules(self) -> dict:
         from torchmetrics import MeanMetric

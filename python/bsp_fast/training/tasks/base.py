@@ -3,10 +3,10 @@
 A task object says which batch keys it reads, which metrics it scores (with their units,
 direction and table format), how a model's output is scored (de-normalisation, the frames
 that count), what its trivial baseline is called, which columns its table and curves show,
-what ``bsp-predict`` stores and which baselines ``bsp-reproduce`` findings may compare
-with. ``bsp-train``, ``bsp-eval``, ``bsp-predict``, the tables, the curves and
-``bsp-reproduce`` ask it (``bsp_fast.training.tasks.get_task(name)``) instead of switching
-on the task's name.
+what ``bsp-predict`` stores, which baselines ``bsp-reproduce`` findings may compare
+with and what ``bsp-eval --breakdown`` keeps and bins by. ``bsp-train``, ``bsp-eval``,
+``bsp-predict``, the tables, the curves and ``bsp-reproduce`` ask it
+(``bsp_fast.training.tasks.get_task(name)``) instead of switching on the task's name.
 
 This module imports neither torch nor Lightning: tables and curves read the declarations
 without them; the scoring and prediction methods import torch when called.
@@ -89,6 +89,15 @@ class Task:
     #: ``baseline:`` names a ``bsp-reproduce`` finding may use: ``{name: (label, f)}``
     #: with ``f(initial metrics) -> value``; default: the trivial baseline itself
     finding_baselines: dict = {}
+    #: what ``bsp-eval --breakdown`` keeps of each test batch: ``"logits"`` (per clip:
+    #: crossing score, predicted and true label; no per-joint table), ``"joint_error_mm"``
+    #: (per frame and joint: the error in mm of ``metres``, MPJPE) or ``"pose_pairs"``
+    #: (per frame: ``pose_pairs``, PCK); ``""``: the task has no breakdown
+    breakdown_scores: str = ""
+    #: the breakdown's size bins: ``"pixel_height"`` (the ground-truth 2D joints' vertical
+    #: extent; per clip: the mean over its frames) or ``"camera_distance"`` (the hips'
+    #: depth along the camera's forward axis)
+    breakdown_bins: str = "pixel_height"
 
     def __repr__(self) -> str:
         return f"<task {self.name!r}>"
@@ -118,6 +127,17 @@ class Task:
         cols = ((("σ (px)", "c", "noise", "g"), ("MJP", "c", "mjp", "mjp"))
                 if self.deformed_inputs else ())
         return cols + tuple((m.header, "m", m.key, m.fmt) for m in self.metrics)
+
+    @property
+    def breakdown_per_clip(self) -> bool:
+        """The breakdown scores whole clips (counts in clips), not frames."""
+        return self.breakdown_scores == "logits"
+
+    @property
+    def breakdown_missing_joints(self) -> bool:
+        """The breakdown has a realised missing-joint table: the inputs are 2D joints,
+        some missing, not crops."""
+        return not self.image_inputs
 
     def dataset_options(self, cfg: dict) -> dict:
         """``ClipDataset`` keywords of this task from a bsp-train config."""

@@ -32,6 +32,7 @@ class Classification(Task):
     deformed_inputs = True
     augments = True
     finding_baselines = {"constant": ("best constant", constant_f1)}
+    breakdown_scores = "logits"
 
     def metric_modules(self) -> dict:
         from ... import metrics as M

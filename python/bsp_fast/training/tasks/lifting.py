@@ -41,6 +41,8 @@ class Lifting(Task):
                             ".2f"))
     curves = ("mpjpe_mm", "n_mpjpe_mm", "pa_mpjpe_mm", "mpjve_mm")
     prediction_units = "metres"
+    breakdown_scores = "joint_error_mm"
+    breakdown_bins = "camera_distance"
 
     def dataset_options(self, cfg: dict) -> dict:
         return {"lifting_target": cfg["lifting_target"]}

@@ -38,6 +38,7 @@ class PoseEstimation(Task):
     extra_metrics = _PER_JOINT + (Metric("fully_occluded_frames", "fully occluded frames",
                                          "frames", "none", ".0f"),)
     curves = ("pck_0.05", "pckhn_0.1")
+    breakdown_scores = "pose_pairs"
 
     def dataset_options(self, cfg: dict) -> dict:
         """Train-time box jitter (``box_jitter_scale``, ``box_jitter_shift``; default off):
