@@ -249,6 +249,14 @@ def test_pie_pickles_set_split_windows_and_training(tmp_path, capsys):
                          limit_batches=2, quiet=True, hp={"hidden_size": 8, "num_layers": 1},
                          out=str(tmp_path / "run"))
     assert run is not None
+    # the report's classification table runs on it too (smoke: plumbing only)
+    from bsp_fast.reproduction import main as reproduce
+
+    capsys.readouterr()
+    assert reproduce(["classification", "--data", str(out), "--budget", "smoke", "--out",
+                      str(tmp_path / "tables"), "--rows", "lstm-perfect,lstm-mjp0.7187"]) == 0
+    table = capsys.readouterr().out
+    assert "smoke budget: plumbing only" in table and "| lstm-mjp0.7187 |" in table
 
 
 class Custom:
