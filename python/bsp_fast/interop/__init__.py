@@ -5,30 +5,16 @@ JSON, through the skeleton maps of :mod:`bsp_fast.skeletons`. ``bsp-interop`` is
 command line (docs/interop.md).
 
 Modules: ``readers`` (input files, labels CSV), ``clipfile`` (planning and writing the
-clip file), ``exporters``, ``cli``.
+clip file; ``import_coco`` and ``import_openpose``), ``exporters``, ``annotation_xml``,
+``jaad``, ``pie`` and ``benchmark_annotations`` (the JAAD and PIE importers),
+``safe_pickle``, ``cli``. This file only hands their names on.
 """
 from __future__ import annotations
 
-from .clipfile import clip_settings, write_clip_file
+from .clipfile import clip_settings, import_coco, import_openpose, write_clip_file
 from .exporters import export_coco, export_videopose3d, read_clips
 from .readers import BadInput, Detections, read_coco, read_labels, read_openpose
 
 __all__ = ["BadInput", "Detections", "read_coco", "read_openpose", "read_labels",
            "write_clip_file", "clip_settings", "export_coco", "export_videopose3d",
            "read_clips", "import_coco", "import_openpose"]
-
-
-def import_coco(path, out, *, images=None, labels=None, image_size=None, tracks="require",
-                joints="coco17", **options) -> dict:
-    """:func:`read_coco` then :func:`write_clip_file` (``labels``: a labels CSV path)."""
-    det = read_coco(path, images=images, image_size=image_size, tracks=tracks, joints=joints)
-    return write_clip_file(det, out, labels=None if labels is None else read_labels(labels),
-                           **options)
-
-
-def import_openpose(folder, out, *, image_size, labels=None, tracks="require",
-                    **options) -> dict:
-    """:func:`read_openpose` then :func:`write_clip_file`."""
-    det = read_openpose(folder, image_size, tracks=tracks)
-    return write_clip_file(det, out, labels=None if labels is None else read_labels(labels),
-                           **options)

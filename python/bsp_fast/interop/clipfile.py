@@ -19,9 +19,9 @@ from .._native import core as _core
 from ..atomic import atomic_output
 from ..conversion.api import clip_settings
 from ..skeletons import CARLA, skeleton_map
-from .readers import BadInput, Detections, option
+from .readers import BadInput, Detections, option, read_coco, read_labels, read_openpose
 
-__all__ = ["clip_settings", "write_clip_file"]  # clip_settings: the converter's own
+__all__ = ["clip_settings", "write_clip_file", "import_coco", "import_openpose"]  # clip_settings: the converter's own
 
 _STR_META = ("video_id", "pedestrian_id", "age", "gender", "model", "map")
 
@@ -211,3 +211,19 @@ def _write(path, plan: dict, rows: dict, names: dict, st: dict, report: dict, m)
                      settings_json=json.dumps(report["settings"], sort_keys=True))
         for k, v in attrs.items():
             f.attrs[k] = v
+
+
+def import_coco(path, out, *, images=None, labels=None, image_size=None, tracks="require",
+                joints="coco17", **options) -> dict:
+    """:func:`read_coco` then :func:`write_clip_file` (``labels``: a labels CSV path)."""
+    det = read_coco(path, images=images, image_size=image_size, tracks=tracks, joints=joints)
+    return write_clip_file(det, out, labels=None if labels is None else read_labels(labels),
+                           **options)
+
+
+def import_openpose(folder, out, *, image_size, labels=None, tracks="require",
+                    **options) -> dict:
+    """:func:`read_openpose` then :func:`write_clip_file`."""
+    det = read_openpose(folder, image_size, tracks=tracks)
+    return write_clip_file(det, out, labels=None if labels is None else read_labels(labels),
+                           **options)
