@@ -413,7 +413,8 @@ def test_table_breakdown_aggregates_bins_over_seeds_by_hand():
     assert cells["lstm"]["head"]["mean"] == 30.0 and cells["lstm"]["head"]["seeds"] == 1
     assert cells["mean"]["hips"]["std"] == 0.0
     md = format_aggregate(agg, {"lstm": "LSTM"}, 2, "## t")
-    assert "| hips | 12.0 ± 2.8 (n 10) | 20.0 (n 10) |" in md
+    # mm in the task registry's format (two decimals), like every other table (#35)
+    assert "| hips | 12.00 ± 2.83 (n 10) | 20.00 (n 10) |" in md
 
 
 def test_rows_of_different_datasets_are_resampled_independently():

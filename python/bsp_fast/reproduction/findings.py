@@ -3,9 +3,7 @@ sizes, "fails", "beats the trivial baseline" (``bsp-reproduce`` without ``--seed
 it, :mod:`.evidence` marks them from intervals). See docs/reproduce.md."""
 from __future__ import annotations
 
-import math
-
-from ..training.tasks import get_task
+from ..training.tasks import format_metric, get_task
 from .table_files import rows_of
 
 __all__ = ["evaluate_findings", "format_value", "better", "YES", "NO", "NA"]
@@ -19,14 +17,9 @@ def better(tab, metric) -> int:
 
 
 def format_value(tab, metric, value, diff: bool = False) -> str:
-    """The one value formatter of the tables: the metric's ``format`` (``pct``: percent
-    with one decimal), ``diff`` with a sign; "–" for no value or NaN."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "–"
-    fmt = tab["metrics"].get(metric, {}).get("format", ".3f")
-    if fmt == "pct":
-        return f"{100 * value:+.1f}" if diff else f"{100 * value:.1f}"
-    return format(value, ("+" if diff else "") + fmt)
+    """A value of ``metric`` in ``tab``'s format (the task registry's): the one formatter,
+    :func:`~bsp_fast.training.tasks.format_metric`."""
+    return format_metric(tab["metrics"].get(metric, {}).get("format", ".3f"), value, diff)
 
 
 def _rel(a, b, relation, margin=0.0) -> bool:

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..training.tasks import format_metric, metric_spec
+
 __all__ = ["run_dirs", "run_breakdowns", "aggregate", "format_aggregate", "draw_breakdowns",
            "table_breakdown", "MD", "JSON"]
 
@@ -111,11 +113,8 @@ def aggregate(docs: dict) -> list:
 
 
 def _value(metric: str, x: float) -> str:
-    if metric.startswith("pck"):
-        return f"{100.0 * x:.1f}"
-    if metric.endswith("_mm"):
-        return f"{x:.1f}"
-    return f"{x:.3f}"
+    spec = metric_spec(metric)
+    return format_metric(spec.fmt if spec is not None else ".3f", x)
 
 
 def format_aggregate(agg: list, labels: dict, n_seeds: int, heading: str) -> str:

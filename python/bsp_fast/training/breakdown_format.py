@@ -8,6 +8,8 @@ import io
 import json
 import math
 
+from .tasks import format_metric, metric_spec
+
 __all__ = ["format_breakdown", "to_json", "plain", "FORMATS"]
 
 FORMATS = ("md", "markdown", "csv", "json")
@@ -32,15 +34,11 @@ def to_json(doc: dict) -> str:
 
 
 def _cell(key: str, value) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "—"
-    if key in ("count", "joints", "crossing"):
+    """A breakdown cell: counts as integers, metrics in the task registry's format."""
+    if value is not None and key in ("count", "joints", "crossing"):
         return str(int(value))
-    if key.startswith("pck"):
-        return f"{100.0 * value:.1f}"
-    if key.endswith("_mm"):
-        return f"{value:.2f}"
-    return f"{value:.3f}"
+    spec = metric_spec(key)
+    return format_metric(spec.fmt if spec is not None else ".3f", value, missing="—")
 
 
 def _markdown(title: str, by: str, unit: str, columns: dict, rows: list) -> list:

@@ -15,7 +15,7 @@ from pathlib import Path
 from . import config as C
 from .overrides import add_overrides, given_overrides
 from ..atomic import OutputOverlapError, refuse
-from .runs import RunError, check_run_outputs, read_run, resolve_checkpoint, run_inputs, \
+from .runs import RunError, check_run_outputs, open_run, resolve_checkpoint, run_inputs, \
     write_json
 
 __all__ = ["evaluate", "breakdown", "main", "EvalResult", "load_run", "prepare_scoring"]
@@ -43,21 +43,10 @@ def load_run(run, which: str = "best", data=None, **overrides):
     (``data``, else the run's dataset folder if it still exists, so its conversion is
     compared with its data.csv, else the HDF5 file the run used if it still exists, else
     its ``data``)."""
-    from .module import checkpoint_info, load_module
+    from .module import load_module
 
-    if which not in ("best", "last"):
-        raise ValueError(f"which must be one of ['best', 'last'], got {which!r}")
-    ckpt, run_dir = resolve_checkpoint(run, which)
-    try:
-        info = checkpoint_info(ckpt)
-    except ValueError as exc:
-        raise RunError(str(exc)) from None
-    run_cfg = read_run(run_dir)["config"] if run_dir is not None else None
-    if run_cfg is not None and (run_cfg.get("task"), run_cfg.get("model")) != \
-            (info["task"], info["model"]):
-        raise RunError(f"{ckpt} is a {info['task']!r} checkpoint of model {info['model']!r}, "
-                       f"but {run_dir / 'config.yaml'} is a {run_cfg.get('task')!r} run of "
-                       f"model {run_cfg.get('model')!r}; refusing to score it as either")
+    opened = open_run(run, which)
+    ckpt, run_dir, info = opened["ckpt"], opened["run_dir"], opened["info"]
     cfg = C.defaults()
     saved = {k: v for k, v in (info.get("config") or {}).items() if k in C.BY_NAME}
     cfg.update(C.normalise(saved, f"{ckpt} (saved config)"))

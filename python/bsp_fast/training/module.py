@@ -18,6 +18,7 @@ from pathlib import Path
 import lightning.pytorch as pl
 import torch
 
+from .runs import checkpoint_info  # noqa: F401  (public here too: the modules' loader)
 from .scoring import TaskMetrics
 from .tasks import TASKS, get_task
 
@@ -192,24 +193,6 @@ class PoseEstimationTask(TaskModule):
 
 TASK_MODULES = {cls.task: cls for cls in (ClassificationTask, AutoencoderTask, LiftingTask,
                                           PoseEstimationTask)}
-
-
-def checkpoint_info(ckpt_path) -> dict:
-    """The saved hyper-parameters of a bsp-train checkpoint (task, model, hparams, lr,
-    config), read without building the model."""
-    path = Path(ckpt_path)
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
-    except Exception as exc:
-        raise ValueError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") \
-            from None
-    hp = ckpt.get("hyper_parameters") if isinstance(ckpt, dict) else None
-    if not isinstance(hp, dict) or hp.get("task") not in TASKS or "model" not in hp:
-        raise ValueError(f"{path}: not a bsp-train checkpoint (no task/model hyper-parameters)")
-    info = dict(hp)
-    info["epoch"] = ckpt.get("epoch")
-    info["global_step"] = ckpt.get("global_step")
-    return info
 
 
 def load_module(ckpt_path, task: str | None = None, map_location="cpu") -> TaskModule:

@@ -22,7 +22,7 @@ from ..atomic import DATASET_FILES, check_outputs, publish, temp_path, write_tex
 __all__ = ["RunDirectory", "RunError", "default_run_dir", "resolve_checkpoint", "read_run",
            "ENV_TMP", "MARKER", "write_marker", "read_marker", "orphaned_runs",
            "resume_hint", "resumable", "is_temporary", "refuse_unsafe_output",
-           "check_run_outputs", "run_inputs"]
+           "check_run_outputs", "run_inputs", "checkpoint_info", "open_run"]
 
 #: Set by the process that created the temporary run directory, so DDP processes that
 #: Lightning starts later (they re-run the command) write into the same directory.
@@ -340,3 +340,53 @@ def _finite(obj):
     if isinstance(obj, (list, tuple)):
         return [_finite(v) for v in obj]
     return obj
+
+
+# ---------------------------------------------------------------------- opening a run
+def checkpoint_info(ckpt_path) -> dict:
+    """The saved hyper-parameters of a bsp-train checkpoint (task, model, hparams, lr,
+    config), read without building the model."""
+    import torch
+
+    from .tasks import TASKS
+
+    path = Path(ckpt_path)
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+    except Exception as exc:
+        raise ValueError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") \
+            from None
+    hp = ckpt.get("hyper_parameters") if isinstance(ckpt, dict) else None
+    if not isinstance(hp, dict) or hp.get("task") not in TASKS or "model" not in hp:
+        raise ValueError(f"{path}: not a bsp-train checkpoint (no task/model hyper-parameters)")
+    info = dict(hp)
+    info["epoch"] = ckpt.get("epoch")
+    info["global_step"] = ckpt.get("global_step")
+    return info
+
+
+def open_run(run, which: str = "best", what: str = "") -> dict:
+    """The one place a run is opened (``bsp-train --resume``, ``bsp-eval``, ``bsp-predict``
+    and so ``bsp-reproduce``'s noisy-box scores): the ``which`` checkpoint (best or last)
+    of a run directory or a ``.ckpt``, its folder (None for a bare checkpoint), the
+    checkpoint's saved hyper-parameters (``info``) and the run's config (its
+    ``config.yaml``, else the checkpoint's), checked to be one task and model. Returns
+    ``{"ckpt", "run_dir", "info", "config"}``; a :class:`RunError` (prefixed ``what``)
+    names a broken checkpoint or the mismatch, before any work."""
+    if which not in ("best", "last"):
+        raise ValueError(f"which must be one of ['best', 'last'], got {which!r}")
+    ckpt, run_dir = resolve_checkpoint(run, which)
+    try:  # truncated, foreign or pickled files: one line
+        info = checkpoint_info(ckpt)
+    except ValueError as exc:
+        raise RunError(f"{what}{exc}") from None
+    config = read_run(run_dir)["config"] if run_dir is not None else \
+        (info.get("config") or {})
+    if "task" in config and \
+            (info.get("task"), info.get("model")) != (config.get("task"), config.get("model")):
+        where = run_dir / "config.yaml" if run_dir is not None else "its saved config"
+        raise RunError(f"{what}{ckpt} is a {info.get('task')!r} checkpoint of model "
+                       f"{info.get('model')!r}, but its run is {config.get('task')!r}: "
+                       f"{where} is a {config.get('task')!r} run of model "
+                       f"{config.get('model')!r}; refusing to use it as either")
+    return {"ckpt": Path(ckpt), "run_dir": run_dir, "info": info, "config": config}

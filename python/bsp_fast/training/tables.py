@@ -18,7 +18,7 @@ import math
 from pathlib import Path
 
 from .runs import RunError, read_run
-from .tasks import TASKS
+from .tasks import TASKS, format_metric
 
 __all__ = ["COLUMNS", "table_rows", "format_table", "runs_table"]
 
@@ -34,13 +34,11 @@ def _fmt(value, fmt: str, raw: bool) -> str:
         return "" if raw else "–"
     if raw:
         return str(value) if not isinstance(value, list) else " ".join(map(str, value))
-    if fmt == "mjp":
+    if fmt == "mjp":  # a setting, not a metric
         if isinstance(value, list):
             return f"per joint (mean {sum(value) / len(value):.4g})"
         return f"{value:g}"
-    if fmt == "pct":
-        return f"{100 * value:.1f}"
-    return format(value, fmt)
+    return format_metric(fmt, value)
 
 
 def table_rows(runs, split: str = "test", raw: bool = False) -> dict:

@@ -14,9 +14,9 @@ from pathlib import Path
 
 from . import config as C
 from ..atomic import OutputOverlapError, refuse, remove, write_bytes
-from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, is_temporary, \
-    read_marker, read_run, refuse_unsafe_output, resolve_checkpoint, resume_hint, write_json, \
-    write_marker
+from .runs import ENV_TMP, MARKER, RunDirectory, RunError, checkpoint_info, default_run_dir, \
+    is_temporary, open_run, read_marker, read_run, refuse_unsafe_output, resume_hint, \
+    write_json, write_marker
 from .precision import check_precision, native_bf16, resolve_precision
 from .setup import make_datamodule, make_trainer, prepare_data, rank as _rank
 from .tasks import TASKS, get_task
@@ -51,19 +51,8 @@ def resolve_config(cli: dict, config_path=None) -> tuple:
     resume = None
     target = cli.get("resume", from_yaml.get("resume"))
     if target:
-        from .module import checkpoint_info
-
-        ckpt, run_dir = resolve_checkpoint(target, "last")
-        try:  # truncated, foreign or pickled files: one line, before any work
-            info = checkpoint_info(ckpt)
-        except ValueError as exc:
-            raise RunError(f"--resume {target}: {exc}") from None
-        saved = read_run(run_dir)["config"] if run_dir is not None else \
-            (info.get("config") or {})
-        if (info.get("task"), info.get("model")) != (saved.get("task"), saved.get("model")):
-            raise RunError(f"--resume {target}: {ckpt} is a {info.get('task')!r} checkpoint "
-                           f"of model {info.get('model')!r}, but its run is "
-                           f"{saved.get('task')!r} / {saved.get('model')!r}")
+        opened = open_run(target, "last", f"--resume {target}: ")
+        ckpt, run_dir, info, saved = (opened[k] for k in ("ckpt", "run_dir", "info", "config"))
         resolved = saved.get("resolved") or {}
         known = {k: v for k, v in saved.items() if k in C.BY_NAME
                  and k not in ("resume", "force", "out", "quiet")}
@@ -324,8 +313,6 @@ def _write_config(cfg: dict, tmp: Path, precision: str, **resolved) -> None:
 
 def _best_epoch(trainer) -> int | None:
     """1-based epoch of ``ModelCheckpoint``'s best checkpoint (None: none validated)."""
-    from .module import checkpoint_info
-
     best = trainer.checkpoint_callback
     if not best.best_model_path or best.best_model_score is None:
         return None

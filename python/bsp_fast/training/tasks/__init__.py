@@ -12,12 +12,12 @@ modules in your own Lightning script").
 from __future__ import annotations
 
 from .autoencoder import Autoencoder
-from .base import Metric, Task
+from .base import NORMALISER_FALLBACK, Metric, Task, format_metric
 from .classification import Classification
 from .lifting import Lifting
 from .pose_estimation import PoseEstimation
 
-__all__ = ["Task", "Metric", "TASKS", "get_task", "BASELINES"]
+__all__ = ["Task", "Metric", "TASKS", "get_task", "BASELINES", "metric_spec", "format_metric"]
 
 #: ``{name: task object}`` in the report's order.
 TASKS = {t.name: t for t in (Classification(), Autoencoder(), Lifting(), PoseEstimation())}
@@ -32,6 +32,16 @@ def get_task(name: str) -> Task:
         return TASKS[name]
     except (KeyError, TypeError):
         raise ValueError(f"task must be one of {list(TASKS)}, got {name!r}") from None
+
+
+def metric_spec(key: str):
+    """The :class:`Metric` any task declares under ``key`` (its metrics, extra metrics and
+    the normaliser fallback share); None for a key no task declares (a count)."""
+    for task in TASKS.values():
+        for m in (*task.metrics, *task.extra_metrics):
+            if m.key == key:
+                return m
+    return NORMALISER_FALLBACK if key == NORMALISER_FALLBACK.key else None
 
 
 def __dir__():

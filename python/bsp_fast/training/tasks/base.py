@@ -15,10 +15,21 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Metric", "Task", "UNIT_SUFFIX", "NORMALISER_FALLBACK"]
+__all__ = ["Metric", "Task", "UNIT_SUFFIX", "NORMALISER_FALLBACK", "format_metric"]
 
 #: Table/curve label suffix of a metric's display unit.
 UNIT_SUFFIX = {"mm": " (mm)", "mm/frame": " (mm/frame)", "%": " (%)", "": ""}
+
+
+def format_metric(fmt: str, value, diff: bool = False, missing: str = "–") -> str:
+    """The one value formatter of every table (runs, reproduced tables, breakdowns): a
+    metric's ``fmt`` (a format spec, or ``pct``: a fraction shown in % with one decimal),
+    ``diff`` with a sign; ``missing`` for no value or NaN."""
+    if value is None or (isinstance(value, float) and value != value):
+        return missing
+    if fmt == "pct":
+        return f"{100 * value:+.1f}" if diff else f"{100 * value:.1f}"
+    return format(value, ("+" if diff else "") + fmt)
 
 
 @dataclass(frozen=True)
