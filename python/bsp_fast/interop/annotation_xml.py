@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .readers import BadInput
 
-__all__ = ["parse_xml", "video_size", "box_record", "crossing_attributes"]
+__all__ = ["parse_xml", "video_size", "box_record", "track_boxes", "crossing_attributes"]
 
 
 def parse_xml(path, what: str):
@@ -45,6 +45,21 @@ def box_record(box, where: str) -> tuple:
                        f"'xbr', 'ybr' (got {dict(box.attrib)}); nothing written") from None
     attrs = {a.get("name"): (a.text or "").strip() for a in box.findall("./attribute")}
     return frame, xyxy, outside, attrs
+
+
+def track_boxes(path, n: int, track) -> tuple:
+    """``(box records, pedestrian id)`` of the ``n``-th ``<track>`` of ``path``;
+    ``([], None)`` for a track without boxes; a track whose boxes carry no ``id``
+    attribute is a :class:`BadInput`."""
+    boxes = [box_record(b, f"{path}: track[{n}] box[{k}]")
+             for k, b in enumerate(track.findall("./box"))]
+    if not boxes:
+        return [], None
+    pid = boxes[0][3].get("id")
+    if not pid:
+        raise BadInput(f"{path}: track[{n}] (frame {boxes[0][0]}): no <attribute "
+                       "name=\"id\">; nothing written")
+    return boxes, pid
 
 
 def crossing_attributes(path, what: str) -> dict:

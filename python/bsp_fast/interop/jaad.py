@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .annotation_xml import box_record, crossing_attributes, parse_xml, video_size
+from .annotation_xml import crossing_attributes, parse_xml, track_boxes, video_size
 from .benchmark_annotations import (BENCHMARK, SPLITS, OpenPoseFrames, PickledPoses, Track,
                                     import_tracks)
 from .readers import BadInput
@@ -58,14 +58,9 @@ def _tracks(path: Path, video: str, subset: str, split) -> list:
     root = parse_xml(path, "JAAD annotation")
     tracks, attrs = [], None
     for n, t in enumerate(root.findall("./track")):
-        boxes = [box_record(b, f"{path}: track[{n}] box[{k}]")
-                 for k, b in enumerate(t.findall("./box"))]
+        boxes, pid = track_boxes(path, n, t)
         if not boxes:
             continue
-        pid = boxes[0][3].get("id")
-        if not pid:
-            raise BadInput(f"{path}: track[{n}] (frame {boxes[0][0]}): no <attribute "
-                           "name=\"id\">; nothing written")
         frames, xyxy = [b[0] for b in boxes], [b[1] for b in boxes]
         beh = "b" in pid
         use = "p" not in pid and (subset == "all" or beh)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .annotation_xml import box_record, crossing_attributes, parse_xml, video_size
+from .annotation_xml import crossing_attributes, parse_xml, track_boxes, video_size
 from .benchmark_annotations import (BENCHMARK, OpenPoseFrames, PickledPoses, Track,
                                     import_tracks)
 from .readers import BadInput
@@ -39,14 +39,9 @@ def _tracks(path: Path, attr_path: Path, video: str, split: str) -> list:
     for n, t in enumerate(root.findall("./track")):
         if t.get("label") != "pedestrian":
             continue
-        boxes = [box_record(b, f"{path}: track[{n}] box[{k}]")
-                 for k, b in enumerate(t.findall("./box"))]
+        boxes, pid = track_boxes(path, n, t)
         if not boxes:
             continue
-        pid = boxes[0][3].get("id")
-        if not pid:
-            raise BadInput(f"{path}: track[{n}] (frame {boxes[0][0]}): no <attribute "
-                           "name=\"id\">; nothing written")
         boxes = [b for b in boxes if b[2] != 1]  # outside the frame
         if attrs is None:
             attrs = _attributes(attr_path)

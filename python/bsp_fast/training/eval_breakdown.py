@@ -314,21 +314,17 @@ def _frame_tables(spec, parts, profiles, per_frame, bins, notes) -> dict:
         joint_cols = {"pck_0.05": "PCK@0.05 (%)"}
         summary = _pck_stats(pred, gt, present)
         total_joints = summary["joints"]
-    if spec.breakdown_bins == "camera_distance":
-        dist = np.concatenate(distance)
-        d_labels = [_edges_label(a, b, "m") for a, b in zip(DISTANCE_EDGES_M,
-                                                            DISTANCE_EDGES_M[1:])]
-        bins["distance_m"] = {"rows": d_labels,
-                              "per": "frame (hips' depth along the camera's forward axis)"}
-        size_table = _table("per camera distance", "distance", "frames", cols,
-                            _grouped(d_labels, bin_index(dist, DISTANCE_EDGES_M), stats), F)
-    else:
-        h_labels = [_edges_label(a, b, "px") for a, b in zip(HEIGHT_EDGES_PX,
-                                                             HEIGHT_EDGES_PX[1:])]
-        bins["height_px"] = {"rows": h_labels,
-                             "per": "frame (vertical extent of its ground-truth 2D joints)"}
-        size_table = _table("per pedestrian pixel height", "height", "frames", cols,
-                            _grouped(h_labels, bin_index(height, HEIGHT_EDGES_PX), stats), F)
+    # (bins key, edges, unit, what a frame's value is, title, first column, values)
+    by_distance = spec.breakdown_bins == "camera_distance"
+    key, edges, unit, per, title, column, values = (
+        ("distance_m", DISTANCE_EDGES_M, "m", "hips' depth along the camera's forward axis",
+         "per camera distance", "distance", np.concatenate(distance)) if by_distance else
+        ("height_px", HEIGHT_EDGES_PX, "px", "vertical extent of its ground-truth 2D joints",
+         "per pedestrian pixel height", "height", height))
+    labels = [_edges_label(a, b, unit) for a, b in zip(edges, edges[1:])]
+    bins[key] = {"rows": labels, "per": f"frame ({per})"}
+    size_table = _table(title, column, "frames", cols,
+                        _grouped(labels, bin_index(values, edges), stats), F)
     tables = [_table("per joint", "joint", "joints", joint_cols, joint_rows, total_joints),
               size_table]
     prof, prof_idx = np.unique(profile.astype(str), return_inverse=True)
