@@ -1,5 +1,12 @@
 """Fixtures shared by the training test files."""
+import os
+
 import pytest
+
+# --precision auto's timed probe (training/precision.py) is off in the tests, so every run's
+# precision follows the models' measured policy whatever the load; test_precision_probe.py
+# turns it on where it is the subject. (Subprocesses inherit this.)
+os.environ.setdefault("BSP_PRECISION_PROBE", "0")
 
 
 @pytest.fixture(scope="module")

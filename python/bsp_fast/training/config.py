@@ -161,9 +161,9 @@ OPTIONS: tuple = (
        "with MASTER_ADDR, MASTER_PORT and NODE_RANK set, or under torchrun "
        "(docs/distributed.md)", "training", minimum=1, metavar="N"),
     _o("precision", "str", "auto", "arithmetic precision; auto = bf16-mixed on GPUs that "
-       "support it and, on CPUs with AVX512-BF16/AMX, for the models measured faster in "
-       "bf16 there; 32 otherwise (see docs/training.md for the measurements)", "training",
-       choices=PRECISIONS, scoring=True),
+       "support it; on a CPU with AVX512-BF16/AMX decided by a short timed probe of this "
+       "model on this machine (cached; config.yaml says what and why); 32 otherwise "
+       "(docs/training.md, Precision)", "training", choices=PRECISIONS, scoring=True),
     _o("checkpoint_every", "str", "10m", "also save checkpoints/last.ckpt every this long "
        "within an epoch (e.g. 10m, 90s, 1h; 0: at epoch ends only), so a killed run "
        "resumes near where it stopped (--resume)", "training", metavar="DURATION"),

@@ -52,13 +52,17 @@ def load_run(run, which: str = "best", data=None, **overrides):
     cfg.update(C.normalise(saved, f"{ckpt} (saved config)"))
     cfg.update(C.normalise({k: v for k, v in overrides.items() if v is not None}))
     h5 = None
-    if data is not None:
-        cfg["data"] = str(data)
-    elif run_dir is not None:
+    resolved = {}
+    if run_dir is not None:
         import yaml
 
         doc = yaml.safe_load((run_dir / "config.yaml").read_text(encoding="utf-8")) or {}
         resolved = doc.get("resolved") or {}
+    if overrides.get("precision") is None and resolved.get("precision") in C.PRECISIONS:
+        cfg["precision"] = resolved["precision"]  # what the run trained in, not re-decided
+    if data is not None:
+        cfg["data"] = str(data)
+    elif run_dir is not None:
         used, folder = resolved.get("h5"), resolved.get("data")
         if isinstance(folder, str) and (Path(folder).is_dir() or (
                 Path(folder).name == "data.csv" and Path(folder).is_file())):

@@ -1,24 +1,153 @@
-"""``--precision``: what ``auto`` picks (per model, from measurements: docs/training.md,
-"Precision") and the warning for bf16 on a CPU without bf16 instructions."""
+"""``--precision``: what ``auto`` picks, decided on this machine, and the warning for bf16
+on a CPU without bf16 instructions (docs/training.md, "Precision").
+
+``auto`` is bf16-mixed on a GPU that supports bf16. On a CPU without native bf16 (no
+AVX512-BF16/AMX: bf16 is emulated there, measured 5-17x slower) it is float32 for every
+model. On a CPU with native bf16 it is decided per (model, CPU model, thread count, torch
+version) by a short timed probe of the run's own model on one of its own train batches:
+a few training steps (forward, loss, backward, optimiser step) in float32 and in bf16
+autocast, alternating, on copies of the network (the run's weights and random state are
+untouched); bf16-mixed when its median step is at least 10 % faster. The answer is cached
+in ``$XDG_CACHE_HOME/bsp_fast/precision.json`` (``~/.cache``; ``BSP_PRECISION_CACHE``
+names another file), so a machine decides once and every later run there agrees, and
+each run records what was picked and why in its ``config.yaml`` (``resolved:
+precision_reason``). ``BSP_PRECISION_PROBE=0`` turns the probe off: then the models'
+``cpu_bf16_faster`` attributes (the earlier measurements) decide. ``--precision`` set to
+anything but ``auto`` is used as given.
+"""
 from __future__ import annotations
 
-__all__ = ["resolve_precision", "native_bf16", "check_precision"]
+import json
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+
+__all__ = ["resolve_precision", "decide_precision", "native_bf16", "check_precision",
+           "probe_cache_path", "probe_key", "time_steps", "MARGIN"]
+
+#: bf16 is picked when its median training step is at most this fraction of float32's
+MARGIN = 0.9
+_STEPS, _WARMUP = 5, 2
 
 
 def resolve_precision(precision: str, accelerator: str, model=None) -> str:
     """``auto`` -> bf16-mixed on a GPU that supports it; on a CPU with native bf16
     (AVX512-BF16/AMX) bf16-mixed for a ``model`` (class or instance) whose
-    ``cpu_bf16_faster`` is set (measured faster there); else 32 (docs/training.md)."""
+    ``cpu_bf16_faster`` is set (measured faster there); else 32. Without a probe: what a
+    run falls back on (:func:`decide_precision` probes)."""
+    return decide_precision(precision, accelerator, model)[0]
+
+
+def decide_precision(precision: str, accelerator: str, model=None, *, probe=None,
+                     key: str | None = None) -> tuple:
+    """``(precision, reason)``. ``probe``: a function ``bf16 -> seconds per step`` on the
+    run's model and batch (see :func:`time_steps`); with it, and the probe not turned off,
+    a CPU with native bf16 decides by measurement, cached under ``key``."""
     if precision != "auto":
-        return precision
+        return precision, "given (--precision)"
     import torch
 
     gpu = accelerator == "gpu" or (accelerator == "auto" and torch.cuda.is_available())
     if gpu and torch.cuda.is_available() and torch.cuda.is_bf16_supported():
-        return "bf16-mixed"
-    if not gpu and getattr(model, "cpu_bf16_faster", False) and native_bf16("cpu"):
-        return "bf16-mixed"
-    return "32"
+        return "bf16-mixed", "auto: a GPU with bf16"
+    if gpu:
+        return "32", "auto: a GPU without bf16"
+    if not native_bf16("cpu"):
+        return "32", ("auto: this CPU has no native bf16 (no AVX512-BF16/AMX), where bf16 "
+                      "is emulated and several times slower")
+    if probe is None or key is None or os.environ.get("BSP_PRECISION_PROBE", "1") == "0":
+        faster = bool(getattr(model, "cpu_bf16_faster", False))
+        return ("bf16-mixed" if faster else "32"), (
+            "auto: native bf16; the model's measured policy (cpu_bf16_faster="
+            f"{faster}; the probe is off)")
+    return _probed(key, probe)
+
+
+def _cpu_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def probe_cache_path() -> Path:
+    given = os.environ.get("BSP_PRECISION_CACHE")
+    if given:
+        return Path(given)
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "bsp_fast" / "precision.json"
+
+
+def probe_key(model_key: str, threads: int) -> str:
+    """What a probe's answer holds for: the model (task/name and hyper-parameters), the CPU
+    model, the thread count and torch's version."""
+    import torch
+
+    return f"{model_key} | {_cpu_name()} | {threads} thread(s) | torch {torch.__version__}"
+
+
+def _read_cache(path: Path) -> dict:
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return doc if isinstance(doc, dict) else {}
+
+
+def _probed(key: str, probe) -> tuple:
+    path = probe_cache_path()
+    cached = _read_cache(path).get(key)
+    if isinstance(cached, dict) and cached.get("precision") in ("32", "bf16-mixed"):
+        return cached["precision"], cached.get("reason", "") + f" (cached in {path})"
+    fp32, bf16 = probe(False), probe(True)
+    pick = "bf16-mixed" if bf16 <= MARGIN * fp32 else "32"
+    reason = (f"auto: probe on this CPU, median step float32 {fp32 * 1e3:.1f} ms, bf16 "
+              f"{bf16 * 1e3:.1f} ms (x{fp32 / bf16:.2f}); bf16 needs x{1 / MARGIN:.2f}")
+    try:  # a cache that cannot be written only costs the next run its probe
+        from ..atomic import write_text
+
+        doc = _read_cache(path)
+        doc[key] = {"precision": pick, "reason": reason, "fp32_s": fp32, "bf16_s": bf16,
+                    "when": time.strftime("%Y-%m-%d %H:%M:%S")}
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_text(path, json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    except OSError:
+        pass
+    return pick, reason
+
+
+def time_steps(net, batch: dict, steps: int = _STEPS, warmup: int = _WARMUP):
+    """A probe for :func:`decide_precision`: ``bf16 -> median seconds`` of training steps
+    (forward, loss, backward, SGD step) of a copy of ``net`` on ``batch``; the caller's
+    weights and random state are untouched."""
+    import copy
+
+    import torch
+
+    def step(model, opt, bf16: bool) -> float:
+        t0 = time.perf_counter()
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            loss = model.loss(model.forward_batch(batch), batch)
+        opt.zero_grad(set_to_none=True)
+        loss.float().backward()
+        opt.step()
+        return time.perf_counter() - t0
+
+    def run(bf16: bool) -> float:
+        with torch.random.fork_rng(devices=[]):
+            model = copy.deepcopy(net).train()
+            opt = torch.optim.SGD([p for p in model.parameters() if p.requires_grad], lr=0.0)
+            first = step(model, opt, bf16)  # warm-up; a slow model (> 1 s) gets 1 + 2
+            n_warm, n = (1, min(steps, 2)) if first > 1.0 else (warmup, steps)
+            for _ in range(n_warm - 1):
+                step(model, opt, bf16)
+            return statistics.median(step(model, opt, bf16) for _ in range(n))
+    return run
 
 
 def native_bf16(accelerator: str) -> bool:

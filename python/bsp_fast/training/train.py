@@ -122,10 +122,6 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
     child = bool(os.environ.get(ENV_TMP)) and max(_rank(), started) > 0
     if cfg["threads"]:
         torch.set_num_threads(cfg["threads"])
-    from ..models import model_class
-
-    precision = resolve_precision(cfg["precision"], cfg["accelerator"],
-                                  model_class(cfg["task"], cfg["model"]))
     # the model first: a bad --hp is refused before any data is converted (the data setup
     # draws no random number, so the weights are those of the seed either way)
     pl.seed_everything(cfg["seed"], workers=True, verbose=False)
@@ -134,9 +130,10 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
                                            config=cfg)
     except (ValueError, TypeError, AssertionError, RuntimeError) as exc:
         raise C.ConfigError(f"model {cfg['model']!r}: {exc}") from None
-    check_precision(precision, cfg["accelerator"])
     dm = make_datamodule(cfg)
     prepare_data(dm, convert=not child)
+    precision, why = _precision(cfg, module, dm)
+    check_precision(precision, cfg["accelerator"])
     ckpt_path = None
     if resume is not None:
         ckpt_path = resume["ckpt"]
@@ -166,7 +163,8 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
         write_marker(tmp, **life_marker, state="running", epoch=None, step=None,
                      **({"fit_done": previous["fit_done"]}
                         if previous and previous.get("fit_done") else {}))
-        _write_config(cfg, tmp, precision)  # now: an interrupted run can be resumed
+        # now: an interrupted run can be resumed
+        _write_config(cfg, tmp, precision, precision_reason=why)
         if copy_from is not None:
             ckpt_path = tmp / "checkpoints" / "last.ckpt"
         life = Lifecycle(tmp, parse_duration(cfg["checkpoint_every"]), sig, life_marker)
@@ -209,7 +207,8 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
                       "first epoch's validation), so there is no best checkpoint: validated "
                       "and tested the last one (checkpoints/last.ckpt, also saved as best.ckpt)",
                       file=sys.stderr)
-            result = _finish(cfg, tmp, final, trainer, initial, precision, seconds, tested)
+            result = _finish(cfg, tmp, final, trainer, initial, precision, seconds, tested,
+                             precision_reason=why)
         except (Interrupted, OutputWriteError) as exc:
             last = tmp / "checkpoints" / "last.ckpt"
             if last.is_file() and last.stat().st_mtime >= t_start:
@@ -228,6 +227,26 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
     return result
 
 
+def _precision(cfg: dict, module, dm) -> tuple:
+    """``(precision, why)`` of the run: ``--precision`` as given, or ``auto`` decided on
+    this machine (a CPU with native bf16: a short probe of this model on one of its train
+    batches, cached per model, CPU and thread count; .precision)."""
+    import json
+
+    import torch
+
+    from .precision import decide_precision, probe_key, time_steps
+
+    ds = dm.datasets["train"]
+    batch = ds[list(range(min(cfg["batch_size"], len(ds))))]
+    model_key = (f"{cfg['task']}/{cfg['model']} "
+                 f"{json.dumps(module.hparams['hparams'], sort_keys=True, default=str)} "
+                 f"batch {len(batch['label'])}")
+    return decide_precision(cfg["precision"], cfg["accelerator"], module.net,
+                            probe=time_steps(module.net, batch),
+                            key=probe_key(model_key, torch.get_num_threads()))
+
+
 def _inputs(cfg: dict, resume, config_path=None) -> list:
     """What a run reads and ``--out`` must never replace: the data (folder, data.csv or
     HDF5 file), the --config file and the checkpoint it starts from."""
@@ -244,7 +263,7 @@ def _initial(cfg: dict, dm, model=None) -> dict:
 
 
 def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds,
-            tested: str = "best"):
+            tested: str = "best", precision_reason: str | None = None):
     from .curves import plot_curves, read_logs
     from .lifecycle import OutputWriteError
 
@@ -275,7 +294,8 @@ def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds,
                         (tmp / "checkpoints" / "last.ckpt").read_bytes())
         write_json(metrics, tmp / "metrics.json")
         _write_config(cfg, tmp, precision, h5=trainer.datamodule.h5_path,
-                      hparams=metrics["hparams"], world_size=metrics["world_size"])
+                      hparams=metrics["hparams"], world_size=metrics["world_size"],
+                      precision_reason=precision_reason)
         plot_curves(tmp, cfg["task"], initial=initial.get("val"),
                     title=f"{cfg['task']} / {cfg['model']}", best_epoch=best_epoch)
         remove(tmp / MARKER)  # the run is complete

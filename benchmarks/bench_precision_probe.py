@@ -1,0 +1,68 @@
+"""What ``--precision auto``'s probe (``bsp_fast.training.precision``) decides for every
+model on this CPU, at the quick budgets' batch sizes, with random weights on fixture clips:
+the median training step in float32 and in bf16 autocast, the ratio, the pick and the
+probe's own time. A fresh cache each run (nothing is read from or written to the user's).
+
+    PYTHONPATH=python python3 benchmarks/bench_precision_probe.py [--threads 1]
+        [--models classification/lstm lifting/poseformer ...]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+
+#: (task/model, the quick budget's batch size, the fixture's clip length)
+MODELS = [("classification/lstm", 64, 16), ("classification/pedestrian_graph", 64, 16),
+          ("autoencoder/simple_transformer", 32, 30), ("lifting/baseline_3d", 64, 16),
+          ("lifting/lstm", 64, 16), ("lifting/lstm_relative_rot", 64, 16),
+          ("lifting/poseformer", 16, 16), ("pose_estimation/pose_cnn", 8, 4)]
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--models", nargs="+", default=[m for m, _, _ in MODELS])
+    args = p.parse_args(argv)
+    tmp = tempfile.mkdtemp(prefix="bench_precision_")
+    os.environ["BSP_PRECISION_PROBE"] = "1"
+    os.environ["BSP_PRECISION_CACHE"] = os.path.join(tmp, "precision.json")
+    import torch
+
+    from bsp_fast import models
+    from bsp_fast.data import ClipDataset
+    from bsp_fast.data.testing import write_clip_file
+    from bsp_fast.training import precision as P
+
+    torch.set_num_threads(args.threads)
+    flags = open("/proc/cpuinfo").read()
+    native = [f for f in ("avx512_bf16", "amx_bf16") if f in flags]
+    print(f"CPU bf16: {', '.join(native) or 'none (AVX2 only)'}; {args.threads} thread(s); "
+          f"torch {torch.__version__}; load average {os.getloadavg()[0]:.1f}")
+    print("| model | batch | auto picks | why | probe s |\n|---|---|---|---|---|")
+    for name, batch_size, length in MODELS:
+        if name not in args.models:
+            continue
+        task, model = name.split("/")
+        h5 = os.path.join(tmp, f"{task}-{length}.h5")
+        if not os.path.exists(h5):
+            media = task == "pose_estimation"
+            write_clip_file(h5, clips=(max(batch_size, 16), 4, 4), clip_length=length,
+                            media=media, crop_size=64, seed=1)
+        ds = ClipDataset(h5, "train", task)
+        batch = ds[list(range(min(batch_size, len(ds))))]
+        torch.manual_seed(0)
+        net = models.create(task, model)
+        t0 = time.perf_counter()
+        got, why = P.decide_precision("auto", "cpu", net, probe=P.time_steps(net, batch),
+                                      key=f"{name} batch {batch_size}")
+        print(f"| {name} | {batch_size} | {got} | {why} | {time.perf_counter() - t0:.1f} |",
+              flush=True)
+    print(f"load average {os.getloadavg()[0]:.1f} at the end")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,169 @@
+"""--precision auto decided on this machine (#36): a timed probe of the run's own model on
+one of its batches, cached per model, CPU and thread count, recorded in config.yaml."""
+import json
+import re
+
+import pytest
+import yaml
+
+import bsp_fast
+from bsp_fast.data.testing import write_clip_file
+from bsp_fast.training import precision as P
+
+NATIVE = bool(re.search(r"avx512_bf16|amx_bf16", open("/proc/cpuinfo").read()))
+
+
+@pytest.fixture
+def probe_on(tmp_path, monkeypatch):
+    monkeypatch.setenv("BSP_PRECISION_PROBE", "1")
+    monkeypatch.setenv("BSP_PRECISION_CACHE", str(tmp_path / "cache" / "precision.json"))
+    return tmp_path / "cache" / "precision.json"
+
+
+def _fake(fp32, bf16, calls):
+    def probe(use_bf16):
+        calls.append(use_bf16)
+        return bf16 if use_bf16 else fp32
+    return probe
+
+
+def test_the_probe_decides_caches_and_says_why(probe_on, monkeypatch):
+    import bsp_fast.models.lstm as lstm
+
+    monkeypatch.setattr(lstm, "cpu_bf16", lambda: True)
+    calls = []
+    got, why = P.decide_precision("auto", "cpu", None, probe=_fake(1.0, 0.5, calls), key="k1")
+    assert got == "bf16-mixed" and "probe" in why and "x2.00" in why and calls == [False, True]
+    doc = json.loads(probe_on.read_text())
+    assert doc["k1"]["precision"] == "bf16-mixed" and doc["k1"]["fp32_s"] == 1.0
+    # the machine decided once: the next run reads the cache, measures nothing
+    again, why = P.decide_precision("auto", "cpu", None, probe=_fake(1.0, 9.0, calls),
+                                    key="k1")
+    assert again == "bf16-mixed" and "cached" in why and len(calls) == 2
+    # within the margin: float32 (bf16 must be at least 10 % faster)
+    got, _ = P.decide_precision("auto", "cpu", None, probe=_fake(1.0, 0.95, []), key="k2")
+    assert got == "32"
+    # given, or a CPU without native bf16: no probe at all
+    calls = []
+    assert P.decide_precision("bf16-mixed", "cpu", None, probe=_fake(1, 1, calls),
+                              key="k3")[0] == "bf16-mixed"
+    monkeypatch.setattr(lstm, "cpu_bf16", lambda: False)
+    got, why = P.decide_precision("auto", "cpu", None, probe=_fake(1.0, 0.1, calls), key="k4")
+    assert got == "32" and "no native bf16" in why and calls == []
+
+
+def test_the_probe_off_falls_back_on_the_models_policy(monkeypatch):
+    import bsp_fast.models.lstm as lstm
+    from bsp_fast import models
+
+    monkeypatch.setenv("BSP_PRECISION_PROBE", "0")
+    monkeypatch.setattr(lstm, "cpu_bf16", lambda: True)
+    fast = models.model_class("lifting", "baseline_3d")
+    got, why = P.decide_precision("auto", "cpu", fast, probe=_fake(1, 9, []), key="k")
+    assert got == "bf16-mixed" and "probe is off" in why
+
+
+def test_the_probe_leaves_the_runs_weights_and_random_state(tmp_path):
+    import torch
+
+    from bsp_fast import models
+    from bsp_fast.data import ClipDataset
+
+    h5 = tmp_path / "c.h5"
+    write_clip_file(h5, clips=(16, 4, 4), clip_length=8, seed=1)
+    batch = ClipDataset(h5, "train", "lifting")[list(range(8))]
+    torch.manual_seed(3)
+    net = models.create("lifting", "baseline_3d", linear_size=32, num_blocks=1)
+    before = [p.detach().clone() for p in net.parameters()]
+    state = torch.get_rng_state()
+    probe = P.time_steps(net, batch, steps=2, warmup=1)
+    assert probe(False) > 0 and probe(True) > 0
+    assert all(torch.equal(a, b) for a, b in zip(before, net.parameters()))
+    assert torch.equal(state, torch.get_rng_state())
+
+
+def test_a_run_records_what_auto_picked_and_why_and_bsp_eval_uses_it(probe_on, tmp_path):
+    from bsp_fast.training.evaluate import evaluate
+
+    h5 = tmp_path / "c.h5"
+    write_clip_file(h5, clips=(16, 4, 4), clip_length=8, seed=1)
+    opts = dict(data=h5, epochs=1, batch_size=8, quiet=True,
+                hp={"linear_size": 32, "num_blocks": 1})
+    run = bsp_fast.train("lifting", "baseline_3d", out=tmp_path / "a", **opts)
+    res = yaml.safe_load((run.run_dir / "config.yaml").read_text())["resolved"]
+    if NATIVE:
+        assert "probe on this CPU" in res["precision_reason"]
+        assert res["precision"] in ("32", "bf16-mixed") and probe_on.is_file()
+        again = bsp_fast.train("lifting", "baseline_3d", out=tmp_path / "b", **opts)
+        res2 = yaml.safe_load((again.run_dir / "config.yaml").read_text())["resolved"]
+        assert "cached" in res2["precision_reason"] and res2["precision"] == res["precision"]
+    else:
+        assert res["precision"] == "32" and "no native bf16" in res["precision_reason"]
+    # bsp-eval scores in what the run trained in (not decided again)
+    assert evaluate(run.run_dir, "test").config["precision"] == res["precision"]
+
+
+#: bf16 autocast against float32 on the same weights and clips, per task: the metric and
+#: its tolerance (relative for losses and errors in mm, absolute for a share of joints)
+TOLERANCE = {"classification": ("loss", dict(rel=0.02)),
+             "lifting": ("mpjpe_mm", dict(rel=0.02)),
+             "pose_estimation": ("pck_0.05", dict(abs=0.01))}
+
+
+@pytest.mark.parametrize("task,name", [("classification", "lstm"),
+                                       ("classification", "pedestrian_graph"),
+                                       ("lifting", "lstm"), ("lifting", "lstm_relative_rot"),
+                                       ("lifting", "poseformer"),
+                                       ("pose_estimation", "pose_cnn")])
+def test_bf16_metrics_stay_within_tolerance_of_fp32_for_every_model(tmp_path, task, name):
+    """The probe may pick bf16 for any model (here: all of them on a CPU with native bf16);
+    each stays within the stated tolerance of float32 (baseline_3d and simple_transformer:
+    test_evidence.py)."""
+    import torch
+
+    from bsp_fast import models
+    from bsp_fast.data import ClipDataset
+    from bsp_fast.training.scoring import TaskMetrics
+
+    h5 = tmp_path / "c.h5"
+    if task == "pose_estimation":
+        write_clip_file(h5, clips=(8, 8, 8), clip_length=4, media=True, crop_size=32, seed=4)
+    else:
+        write_clip_file(h5, clips=(8, 8, 8), clip_length=16, seed=4)
+    b = ClipDataset(h5, "test", task, noise=5.0 if task != "pose_estimation" else 0.0)[:8]
+    torch.manual_seed(0)
+    m = models.create(task, name).eval()
+    metric, tol = TOLERANCE[task]
+    values = {}
+    for bf16 in (False, True):
+        with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            out = m.forward_batch(b)
+            loss = float(m.loss(out, b))
+        tm = TaskMetrics(task)
+        tm.update(out.float(), b, m)
+        values[bf16] = loss if metric == "loss" else tm.compute()[metric]
+    assert values[True] == pytest.approx(values[False], **tol), (name, values)
+
+
+def test_bench_precision_probe_smoke(monkeypatch, capsys):
+    """benchmarks/bench_precision_probe.py on its fastest model."""
+    import importlib.util
+    from pathlib import Path
+
+    import torch
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_precision_probe.py"
+    spec = importlib.util.spec_from_file_location("bench_precision_probe", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    monkeypatch.setenv("BSP_PRECISION_PROBE", "0")  # restored afterwards: the bench sets it
+    monkeypatch.setenv("BSP_PRECISION_CACHE", "unused")
+    threads = torch.get_num_threads()
+    try:
+        assert bench.main(["--models", "lifting/lstm"]) == 0
+    finally:
+        torch.set_num_threads(threads)
+    out = capsys.readouterr().out
+    row = [line for line in out.splitlines() if line.startswith("| lifting/lstm |")]
+    assert len(row) == 1 and ("bf16-mixed" in row[0] or "| 32 |" in row[0])
+    assert ("probe on this CPU" in row[0]) == NATIVE
