@@ -167,3 +167,26 @@ def test_bench_precision_probe_smoke(monkeypatch, capsys):
     row = [line for line in out.splitlines() if line.startswith("| lifting/lstm |")]
     assert len(row) == 1 and ("bf16-mixed" in row[0] or "| 32 |" in row[0])
     assert ("probe on this CPU" in row[0]) == NATIVE
+
+
+def test_parallel_runs_wait_for_one_probe(probe_on):
+    """Two processes deciding the same key at once: one probes, the other reads its answer
+    (bsp-reproduce's seeds must not train in different precisions)."""
+    import subprocess
+    import sys
+
+    if not NATIVE:
+        pytest.skip("the probe runs only on a CPU with native bf16")
+    code = ("import sys, time\n"
+            "from bsp_fast.training import precision as P\n"
+            "def probe(bf16):\n"
+            "    time.sleep(1.0)\n"
+            "    print('probed', flush=True)\n"
+            "    return 0.5 if bf16 else 1.0\n"
+            "print(P.decide_precision('auto', 'cpu', None, probe=probe, key='same'))\n")
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+             for _ in range(2)]
+    outs = [p.communicate(timeout=120)[0] for p in procs]
+    assert sum(o.count("probed") for o in outs) == 2  # one process, both precisions
+    assert sum("cached" in o for o in outs) == 1
+    assert all("bf16-mixed" in o for o in outs)

@@ -100,7 +100,24 @@ def _read_cache(path: Path) -> dict:
 
 
 def _probed(key: str, probe) -> tuple:
+    """Under an exclusive lock beside the cache: runs started together (bsp-reproduce's
+    seeds in parallel processes) wait for the first one's probe and read its answer, so
+    the seeds of a row never train in different precisions (nor time each other)."""
+    import contextlib
+    import fcntl
+
     path = probe_cache_path()
+    with contextlib.ExitStack() as stack:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            lock = stack.enter_context(open(path.with_name(path.name + ".lock"), "a"))
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        except OSError:
+            pass  # no lock where none can be made: each run probes for itself
+        return _probed_locked(path, key, probe)
+
+
+def _probed_locked(path: Path, key: str, probe) -> tuple:
     cached = _read_cache(path).get(key)
     if isinstance(cached, dict) and cached.get("precision") in ("32", "bf16-mixed"):
         return cached["precision"], cached.get("reason", "") + f" (cached in {path})"
