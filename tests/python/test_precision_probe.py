@@ -190,3 +190,18 @@ def test_parallel_runs_wait_for_one_probe(probe_on):
     assert sum(o.count("probed") for o in outs) == 2  # one process, both precisions
     assert sum("cached" in o for o in outs) == 1
     assert all("bf16-mixed" in o for o in outs)
+
+
+def test_bench_seed_layout_smoke(capsys, monkeypatch):
+    """benchmarks/bench_seed_layout.py on one fast model (its worker processes are spawned
+    and import the benchmark by name, so it is imported from its folder)."""
+    import importlib
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    bench = importlib.import_module("bench_seed_layout")
+    assert bench.main(["--steps", "1", "--sync-delay", "8", "--models",
+                       "classification/lstm"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines()
+            if line.startswith("| classification/lstm | 64 |")]
+    assert len(rows) == 1 and float(rows[0].rstrip(" |").rsplit("|", 1)[1]) > 0
