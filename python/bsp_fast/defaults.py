@@ -8,7 +8,7 @@ The C++ core keeps its own copy of the conversion defaults in
 """
 from __future__ import annotations
 
-__all__ = ["SEED", "CONVERT", "CROP_BOXES", "POSE_CROP_CONTEXT"]
+__all__ = ["SEED", "CONVERT", "CROP_BOXES", "POSE_CROP_CONTEXT", "experiments_dirs"]
 
 SEED = 22742
 """The original code's seed: the converter's split shuffle, training (weights, noise, batch
@@ -31,3 +31,25 @@ POSE_CROP_CONTEXT = 1.25
 """The crop context ``BSPDataModule`` converts with for ``pose_estimation`` (bsp-convert's
 default is 1, none): enough for box noise of scale +-10 % and shift +-5 % of the side
 (docs/data.md, "Box noise")."""
+
+
+def experiments_dirs(sub: str = "") -> list:
+    """Where the report's table files (``sub`` "": ``experiments/TABLE.yaml``, read by
+    bsp-reproduce) and mixing tables (``sub`` "mix") are looked up, in order: each folder
+    of ``$BSP_EXPERIMENTS`` (``os.pathsep``-separated), ``./experiments``, the tables
+    installed with the package (``bsp_fast/experiments``), the source tree's
+    ``experiments/``; each with ``sub`` appended, without repeats."""
+    import os
+    from importlib import resources
+    from pathlib import Path
+
+    dirs = [Path(d) for d in os.environ.get("BSP_EXPERIMENTS", "").split(os.pathsep) if d]
+    dirs += [Path.cwd() / "experiments",
+             Path(str(resources.files("bsp_fast").joinpath("experiments"))),
+             Path(__file__).resolve().parents[2] / "experiments"]
+    out = []
+    for d in dirs:
+        d = d / sub if sub else d
+        if d not in out:
+            out.append(d)
+    return out

@@ -166,19 +166,11 @@ class _Sequential:
 def mix_dirs() -> list:
     """Where mixing tables are looked up by name, in order: ``$BSP_EXPERIMENTS/mix``,
     ``./experiments/mix``, the tables installed with the package
-    (``bsp_fast/experiments/mix``), the source tree's ``experiments/mix``."""
-    import os
-    from importlib import resources
+    (``bsp_fast/experiments/mix``), the source tree's ``experiments/mix``
+    (:func:`bsp_fast.defaults.experiments_dirs`, as bsp-reproduce's tables)."""
+    from ..defaults import experiments_dirs
 
-    dirs = [Path(d) / "mix" for d in os.environ.get("BSP_EXPERIMENTS", "").split(os.pathsep) if d]
-    dirs += [Path.cwd() / "experiments" / "mix",
-             Path(str(resources.files("bsp_fast").joinpath("experiments"))) / "mix",
-             Path(__file__).resolve().parents[3] / "experiments" / "mix"]
-    out = []
-    for d in dirs:
-        if d not in out:
-            out.append(d)
-    return out
+    return experiments_dirs("mix")
 
 
 def mix_table(name_or_path) -> Path:

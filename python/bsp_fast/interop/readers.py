@@ -257,9 +257,12 @@ def _assign_untracked(rows: list, tracks: str, frames: dict, words: dict) -> tup
     keep = [r for r in rows if r[1] is not None]
     switches, dropped = [], 0
     best = option("tracks='best'", "--tracks best")
-    for video in sorted({v for v, _ in by_frame}):
+    per_video: dict = {}  # grouped once: a scan of every key per video is quadratic
+    for video, frame in by_frame:
+        per_video.setdefault(video, []).append(frame)
+    for video in sorted(per_video):
         prev, track = None, 0
-        for frame in sorted(f for v, f in by_frame if v == video):
+        for frame in sorted(per_video[video]):
             group = by_frame[(video, frame)]
             if len(group) > 1 and tracks == "require":
                 raise BadInput(f"{group[0][5]}: " + words["several"].format(n=len(group),

@@ -46,22 +46,32 @@ def row_values(num, den) -> np.ndarray:
         return num.sum(-1) / den.sum(-1)
 
 
-def _replicates(rows: list, n_resamples: int, rng, correct: bool = False) -> list:
-    """``[(B,) row values]``: recordings drawn once per replicate for all rows, seeds
-    drawn per row. ``correct``: each row's seed-resampling deviation (from the mean of all
-    its seeds on the same drawn recordings) scaled by sqrt(S / (S - 1)), the bootstrap's
-    known shrinkage of a mean's variance over S seeds."""
+def _per_seed(rows: list, n_resamples: int, rng) -> tuple:
+    """``(rec, [(B, S) values])``: per replicate the drawn recordings (one draw for every
+    row), and each row's drawn seeds' values ``sum(num) / sum(den)`` over them."""
     R = rows[0][0].shape[1]
     rec = rng.integers(0, R, size=(n_resamples, R))
     out = []
     for num, den in rows:
-        S = num.shape[0]
-        seeds = rng.integers(0, S, size=(n_resamples, S))
-        # (B, S, R) sums per drawn seed over the drawn recordings, then the seeds' mean
-        n = num[seeds[:, :, None], rec[:, None, :]].sum(-1)
+        seeds = rng.integers(0, num.shape[0], size=(n_resamples, num.shape[0]))
+        n = num[seeds[:, :, None], rec[:, None, :]].sum(-1)  # (B, S) over drawn recordings
         d = den[seeds[:, :, None], rec[:, None, :]].sum(-1)
         with np.errstate(invalid="ignore", divide="ignore"):
-            drawn = np.nanmean(n / d, axis=1)
+            out.append(n / d)
+    return rec, out
+
+
+def _replicates(rows: list, n_resamples: int, rng, correct: bool = False) -> list:
+    """``[(B,) row values]``: the mean of each row's drawn seeds (:func:`_per_seed`).
+    ``correct``: each row's seed-resampling deviation (from the mean of all its seeds on
+    the same drawn recordings) scaled by sqrt(S / (S - 1)), the bootstrap's known
+    shrinkage of a mean's variance over S seeds."""
+    rec, per_seed = _per_seed(rows, n_resamples, rng)
+    out = []
+    for (num, den), values in zip(rows, per_seed):
+        S = num.shape[0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            drawn = np.nanmean(values, axis=1)
             if correct and S > 1:
                 every = np.nanmean(num[:, rec].sum(-1) / den[:, rec].sum(-1), axis=0)
                 drawn = every + np.sqrt(S / (S - 1)) * (drawn - every)
@@ -125,16 +135,7 @@ def probability_of_improvement(a, b, better: int = 1, *, confidence: float = CON
     R = na.shape[1]
     if R < 2:
         return Interval(value, float("nan"), float("nan"), R)
-    rng = np.random.default_rng(seed)
-    rec = rng.integers(0, R, size=(n_resamples, R))
-    vals = []
-    for num, den in ((na, da), (nb, db)):
-        S = num.shape[0]
-        seeds = rng.integers(0, S, size=(n_resamples, S))
-        n = num[seeds[:, :, None], rec[:, None, :]].sum(-1)
-        d = den[seeds[:, :, None], rec[:, None, :]].sum(-1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            vals.append(n / d)
+    _, vals = _per_seed([(na, da), (nb, db)], n_resamples, np.random.default_rng(seed))
     reps = p(vals[0], vals[1])
     alpha = (1 - confidence) / 2
     low, high = np.quantile(reps, [alpha, 1 - alpha])

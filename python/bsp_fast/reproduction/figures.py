@@ -64,8 +64,8 @@ def check_figures(tab: dict) -> None:
 
 
 def _seed_values(r: dict, metric: str) -> list:
-    """The values of ``metric`` of one row's result: one per seed (``--seeds``) or the
-    single run's."""
+    """The values of ``metric`` of one row's result: one per seed, or the single run's
+    of a results.json written before the runner gave every row its ``seeds`` (#35)."""
     key = "initial" if r.get("source") == "initial" else "metrics"
     if "seeds" in r:
         vals = [s[key].get(metric) for s in r["seeds"].values()]

@@ -200,10 +200,10 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
     base = Path(out) / f"{tab['table']}-{budget}"
     plan = _plan(tab, data, budget, base, wanted, seed_values, split_seeds, overrides,
                  1 if jobs > 1 else None, convert=not dry_run)
+    import yaml
+
     todo = []
     for row, seed, run_dir, opts in plan:
-        import yaml
-
         label = row["name"] if seed is None else f"{row['name']} seed {seed}"
         name = row["name"] if seed is None else f"{row['name']}-seed-{seed}"
         cfg_path = base / "configs" / f"{name}.yaml"

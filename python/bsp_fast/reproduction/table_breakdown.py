@@ -29,18 +29,13 @@ _COUNTS = ("count", "joints", "crossing")
 
 
 def run_dirs(res: dict) -> list:
-    """``[(row, seed or None, run_dir)]`` of bsp-reproduce's results (one run per row, or
-    ``--seeds``); rows that read another row's trivial baseline have no run of their own."""
-    out = []
-    for name, r in res["results"].items():
-        if r.get("run_of") or r.get("source") == "initial" or \
-                str(r.get("run", "")).endswith("(initial metrics)"):
-            continue
-        if "seeds" in r:
-            out += [(name, seed, Path(one["run"])) for seed, one in r["seeds"].items()]
-        else:
-            out.append((name, None, Path(r["run"])))
-    return out
+    """``[(row, seed or None, run_dir)]`` of bsp-reproduce's results (:func:`.runner.run_table`:
+    every row holds its runs under ``seeds``; the seed is None for the single-run table);
+    rows that read another row's trivial baseline have no run of their own."""
+    single = res.get("seeds") is None
+    return [(name, None if single else seed, Path(one["run"]))
+            for name, r in res["results"].items() if r.get("source") != "initial"
+            for seed, one in r["seeds"].items()]
 
 
 def _fresh(run_dir: Path, file: Path) -> bool:

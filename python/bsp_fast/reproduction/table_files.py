@@ -11,10 +11,10 @@ ablation tables also use ``own_updates`` (a row's own update cap, with its reaso
 """
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
+from .. import defaults
 from ..training import config as C
 from .figures import check_figures
 from ..training.tasks import get_task
@@ -66,16 +66,10 @@ def check_budget_rule(tab: dict) -> None:
 
 
 def experiments_dirs() -> list:
-    """Where table files are looked up, in order: ``$BSP_EXPERIMENTS``, ``./experiments``,
-    the tables installed with the package (``bsp_fast/experiments``), the source tree's
-    ``experiments/``."""
-    from importlib import resources
-
-    dirs = [Path(os.environ["BSP_EXPERIMENTS"])] if os.environ.get("BSP_EXPERIMENTS") else []
-    dirs += [Path.cwd() / "experiments",
-             Path(str(resources.files("bsp_fast").joinpath("experiments"))),
-             Path(__file__).resolve().parents[3] / "experiments"]
-    return dirs
+    """Where table files are looked up (:func:`bsp_fast.defaults.experiments_dirs`):
+    ``$BSP_EXPERIMENTS``, ``./experiments``, the tables installed with the package
+    (``bsp_fast/experiments``), the source tree's ``experiments/``."""
+    return defaults.experiments_dirs()
 
 
 def experiments_dir() -> Path:

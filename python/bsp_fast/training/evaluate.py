@@ -52,12 +52,8 @@ def load_run(run, which: str = "best", data=None, **overrides):
     cfg.update(C.normalise(saved, f"{ckpt} (saved config)"))
     cfg.update(C.normalise({k: v for k, v in overrides.items() if v is not None}))
     h5 = None
-    resolved = {}
-    if run_dir is not None:
-        import yaml
-
-        doc = yaml.safe_load((run_dir / "config.yaml").read_text(encoding="utf-8")) or {}
-        resolved = doc.get("resolved") or {}
+    # the run's config.yaml, as open_run read it (a bare checkpoint has no "resolved")
+    resolved = (opened["config"].get("resolved") or {}) if run_dir is not None else {}
     if overrides.get("precision") is None and resolved.get("precision") in C.PRECISIONS:
         cfg["precision"] = resolved["precision"]  # what the run trained in, not re-decided
     if data is not None:

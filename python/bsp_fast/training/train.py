@@ -7,13 +7,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import config as C
-from ..atomic import OutputOverlapError, refuse, remove, write_bytes
+from ..atomic import OutputOverlapError, atomic_output, refuse, remove
 from .runs import ENV_TMP, MARKER, RunDirectory, RunError, checkpoint_info, default_run_dir, \
     is_temporary, open_run, read_marker, read_run, refuse_unsafe_output, resume_hint, \
     write_json, write_marker
@@ -238,12 +239,18 @@ def _precision(cfg: dict, module, dm) -> tuple:
     from .precision import decide_precision, probe_key, time_steps
 
     ds = dm.datasets["train"]
-    batch = ds[list(range(min(cfg["batch_size"], len(ds))))]
+    n = min(cfg["batch_size"], len(ds))
+    steps = []  # the batch is read only when a probe runs (auto, native bf16, not cached)
+
+    def probe(bf16: bool) -> float:
+        if not steps:
+            steps.append(time_steps(module.net, ds[list(range(n))]))
+        return steps[0](bf16)
+
     model_key = (f"{cfg['task']}/{cfg['model']} "
                  f"{json.dumps(module.hparams['hparams'], sort_keys=True, default=str)} "
-                 f"batch {len(batch['label'])}")
-    return decide_precision(cfg["precision"], cfg["accelerator"], module.net,
-                            probe=time_steps(module.net, batch),
+                 f"batch {n}")
+    return decide_precision(cfg["precision"], cfg["accelerator"], module.net, probe=probe,
                             key=probe_key(model_key, torch.get_num_threads()))
 
 
@@ -290,8 +297,8 @@ def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds,
                "world_size": int(trainer.world_size), "seconds": seconds}
     try:
         if tested == "last":  # the checkpoint the metrics are of, where bsp-eval looks
-            write_bytes(tmp / "checkpoints" / "best.ckpt",
-                        (tmp / "checkpoints" / "last.ckpt").read_bytes())
+            with atomic_output(tmp / "checkpoints" / "best.ckpt", force=True) as part:
+                shutil.copyfile(tmp / "checkpoints" / "last.ckpt", part)  # not via memory
         write_json(metrics, tmp / "metrics.json")
         _write_config(cfg, tmp, precision, h5=trainer.datamodule.h5_path,
                       hparams=metrics["hparams"], world_size=metrics["world_size"],
