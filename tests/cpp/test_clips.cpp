@@ -108,6 +108,38 @@ TEST_CASE("plan_clips: label_fraction looks at the last ceil(L * F) frames") {
         std::vector<ClipKey>{{0, 0, 0, 0, 1}, {0, 3, 0, 1, 0}});
 }
 
+TEST_CASE("plan_clips: benchmark windows carry their time to event (SPEC section 4)") {
+  // A crosses from frame 100 (event 100): frames 36..70 kept, windows every 6 from 36.
+  // B never crosses (event 99 - 3 = 96, frames 32..66 kept) and lacks frame 50: windows
+  // start at 32, 38, 44 in 32..49 and at 51, 57, 63 in 51..66.
+  Table t;
+  for (std::int64_t f = 0; f < 120; ++f) t.add(0, f, f >= 100);
+  for (std::int64_t f = 0; f < 100; ++f)
+    if (f != 50) t.add(1, f);
+  ClipOptions o = length(4);
+  o.stride = 6;
+  o.benchmark = true;
+  const Plan p = plan_clips(t.keys(), o);
+  REQUIRE(p.recordings.size() == 2);
+  CHECK(p.recordings[0].event_frame == 100);
+  CHECK(p.recordings[1].event_frame == 96);
+  std::vector<std::vector<std::int32_t>> tte(2);
+  for (const auto& split : p.splits)
+    for (const Clip& c : split) {
+      const Recording& rec = p.recordings[c.recording];
+      const std::int64_t last = t.frame[rec.rows[c.first + 3]];
+      CHECK(c.time_to_event == rec.event_frame - last);
+      tte[c.recording].push_back(c.time_to_event);
+    }
+  for (auto& v : tte) std::sort(v.begin(), v.end());
+  // A: last frames 39, 45, ..., 69; B: 35, 41, 47 and 54, 60, 66 (the bound 30 included)
+  CHECK(tte[0] == std::vector<std::int32_t>{31, 37, 43, 49, 55, 61});
+  CHECK(tte[1] == std::vector<std::int32_t>{30, 36, 42, 49, 55, 61});
+  o.benchmark = false;  // no event: every clip says so
+  for (const auto& split : plan_clips(t.keys(), o).splits)
+    for (const Clip& c : split) CHECK(c.time_to_event == kNoEvent);
+}
+
 TEST_CASE("plan_clips refuses bad options") {
   const Table t = four_recordings();
   CHECK_THROWS_AS(plan_clips(t.keys(), length(0)), std::invalid_argument);

@@ -97,6 +97,15 @@ def test_benchmark_time_to_event_windows():
     assert sorted(rr[1][f] - 120 for f, _ in firsts[1]) == [32 + 6 * i for i in range(6)]
     assert all(lab == 0 for _, lab in firsts[1])
     assert [s[0] for s in p["skipped"]] == [2]
+    # time to event: the event minus the window's last frame (first + L - 1)
+    tte = {}
+    for s in ("train", "val", "test"):
+        for r, first, t in zip(p[s]["recording"], p[s]["first"], p[s]["time_to_event"]):
+            tte.setdefault(int(r), []).append((int(rr[r][first]) % 120 + L - 1, int(t)))
+    assert sorted(tte[0]) == [(39 + 6 * i, 61 - 6 * i) for i in range(6)]  # event 100
+    assert sorted(tte[1]) == [(35 + 6 * i, 61 - 6 * i) for i in range(6)]  # event 96
+    plain = plan(crosser + walker, clip_length=L, clip_stride=6)
+    assert {int(t) for s in ("train", "val", "test") for t in plain[s]["time_to_event"]} == {-1}
 
 
 def test_split_by_recording_follows_the_fill_rule():

@@ -154,6 +154,7 @@ def _check_windows(data, stride, event_of, label_of):
         d = data[s]
         assert d["uv"].shape[1:] == (16, 26, 2)
         assert np.all(np.diff(d["frames"], axis=1) == 1)  # 16 consecutive frames
+        assert d["tte"].dtype == np.int32  # as bsp-convert --benchmark writes meta/tte
         for i in range(len(d["labels"])):
             ev = event_of[d["ped"][i]]
             assert d["tte"][i] == ev - (d["end"][i] - 1)

@@ -13,6 +13,7 @@ CONTEXT = {"lstm_relative_rot": ("age", "gender")}
 # widths that keep the batch-64 shape checks quick (same code paths as the defaults)
 SMALL = {"poseformer": dict(embed_dim_ratio=8, depth=1),
          "pose_cnn": dict(width=8, hidden=16), "baseline_3d": dict(linear_size=64),
+         "pose_temporal": dict(width=4),
          "simple_transformer": dict(dim_feedforward=64),
          "simple_transformer_pe": dict(dim_feedforward=64)}
 
@@ -46,8 +47,8 @@ def test_registry_lists_every_model():
     assert set(models.available("autoencoder")) == {"simple_transformer", "simple_transformer_pe"}
     assert set(models.available("lifting")) == {"baseline_3d", "lstm", "poseformer",
                                                 "lstm_relative_rot"}
-    assert set(models.available("pose_estimation")) == {"pose_cnn"}
-    assert len(models.available()) == 9 and "lifting/poseformer" in models.available()
+    assert set(models.available("pose_estimation")) == {"pose_cnn", "pose_temporal"}
+    assert len(models.available()) == 10 and "lifting/poseformer" in models.available()
 
 
 def test_bad_names_and_hparams_raise_listing_what_is_allowed():
@@ -117,6 +118,8 @@ PARAMS = {
         (3, 32), (32, 64), (64, 64), (64, 128), (128, 128), (128, 256), (256, 256)])
     + (256 * 16 * 256 + 256) + 2 * (3 * 128 * (256 + 128) + 6 * 128) + 256 * 52 + 52
     + (128 * 26 + 26) + 1 + (308 * 256 + 256),
+    # the hand count is in test_pose_temporal.py (test_parameters_by_hand_...)
+    ("pose_estimation", "pose_temporal"): 763_179,
 }
 
 

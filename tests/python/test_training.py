@@ -31,7 +31,7 @@ TINY = {"classification": ("lstm", {"hidden_size": 8, "num_layers": 1}),
         "autoencoder": ("simple_transformer", {"num_layers": 1, "dim_feedforward": 16}),
         "lifting": ("baseline_3d", {"linear_size": 32, "num_blocks": 1}),
         "pose_estimation": ("pose_cnn", {"width": 4, "hidden": 16})}
-KEYS = {"classification": {"loss", "f1", "precision", "recall", "accuracy",
+KEYS = {"classification": {"loss", "f1", "precision", "recall", "accuracy", "auroc", "ap",
                            "normaliser_fallback"},
         "autoencoder": {"loss", "pck_0.05", "pckhn_0.1", "mjr", "normaliser_fallback"},
         "lifting": {"loss", "mpjpe_mm", "n_mpjpe_mm", "pa_mpjpe_mm", "mpjve_mm",
@@ -122,7 +122,8 @@ def test_eval_cli_and_table(runs, capsys, tmp_path):
     assert eval_main(["--table"] + [str(r.run_dir) for r in runs.values()]) == 0
     text = capsys.readouterr().out
     for title, header in (
-            ("classification", "| model | σ (px) | MJP | F1 | precision | recall | accuracy |"),
+            ("classification", "| model | σ (px) | MJP | F1 | precision | recall | accuracy "
+                               "| AUROC | AP |"),
             ("autoencoder", "| model | σ (px) | MJP | MJR | PCK@0.05 (%) | PCKhn@0.1 (%) |"),
             ("lifting", "| model | MPJPE (mm) | N-MPJPE (mm) | PA-MPJPE (mm) | MPJVE (mm/frame) |"),
             ("pose_estimation", "| model | PCK@0.05 (%) | PCKhn@0.1 (%) |")):

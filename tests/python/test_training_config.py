@@ -170,7 +170,8 @@ def _fake_run(root, name, task, model, test, initial, noise=0.0):
 
 def test_table_layout_and_initial_rows(tmp_path):
     a = _fake_run(tmp_path, "a", "classification", "lstm",
-                  {"f1": 0.8125, "precision": 0.75, "recall": 0.9, "accuracy": 0.8},
+                  {"f1": 0.8125, "precision": 0.75, "recall": 0.9, "accuracy": 0.8,
+                   "auroc": 0.875, "ap": 0.8},
                   {"f1": 0.0, "precision": 0.0, "recall": 0.0, "accuracy": 0.6})
     b = _fake_run(tmp_path, "b", "classification", "pedestrian_graph",
                   {"f1": 0.5, "precision": 0.5, "recall": 0.5, "accuracy": 0.5},
@@ -183,14 +184,16 @@ def test_table_layout_and_initial_rows(tmp_path):
     assert lines[0] == "### classification (test)"
     header = [h.strip() for h in lines[2].strip("|").split("|")]
     assert header == ["model", "σ (px)", "MJP", "F1", "precision", "recall", "accuracy",
-                      "epochs", "run"]
+                      "AUROC", "AP", "epochs", "run"]
     rows = [[x.strip() for x in ln.strip("|").split("|")] for ln in lines[4:]]
     # one initial row per data setting (noise 0 and noise 5), before the runs
     assert [r[0] for r in rows] == ["initial: majority class"] * 2 + ["lstm", "pedestrian_graph",
                                                                        "lstm"]
-    assert rows[2][3] == "0.812" and rows[2][7] == "3/4" and rows[4][1] == "5"
+    assert rows[2][3] == "0.812" and rows[2][9] == "3/4" and rows[4][1] == "5"
+    # AUROC and AP; a run scored before they existed (b) shows none
+    assert rows[2][7:9] == ["0.875", "0.800"] and rows[3][7:9] == ["–", "–"]
     csv_text = runs_table([a], fmt="csv")
     assert csv_text.splitlines()[0].startswith("task,model,σ (px),MJP,F1,precision")
-    assert "classification,lstm,0.0,0.0,0.8125,0.75,0.9,0.8,3/4,a" in csv_text
+    assert "classification,lstm,0.0,0.0,0.8125,0.75,0.9,0.8,0.875,0.8,3/4,a" in csv_text
     with pytest.raises(ValueError, match=r"format must be one of \['markdown', 'csv'\]"):
         runs_table([a], fmt="html")

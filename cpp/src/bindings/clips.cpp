@@ -11,15 +11,16 @@ py::dict plan_dict(const Plan& plan) {
   for (int s = 0; s < 3; ++s) {
     const auto& clips = plan.splits[s];
     const auto n = static_cast<py::ssize_t>(clips.size());
-    CArray<std::int64_t> rec(n), first(n), seg(n), idx(n), label(n);
+    CArray<std::int64_t> rec(n), first(n), seg(n), idx(n), label(n), tte(n);
     for (py::ssize_t i = 0; i < n; ++i) {
       const Clip& c = clips[static_cast<std::size_t>(i)];
       rec.mutable_at(i) = c.recording, first.mutable_at(i) = c.first;
       seg.mutable_at(i) = c.segment, idx.mutable_at(i) = c.index, label.mutable_at(i) = c.label;
+      tte.mutable_at(i) = c.time_to_event;
     }
     py::dict d;
     d["recording"] = rec, d["first"] = first, d["segment"] = seg, d["index"] = idx;
-    d["label"] = label;
+    d["label"] = label, d["time_to_event"] = tte;  // -1: no event (not benchmark mode)
     d["recordings"] = plan.split_recordings[s];
     out[kSplitNames[s]] = d;
   }

@@ -145,8 +145,13 @@ std::vector<Clip> slice(const RowKeys& k, const Recording& rec, std::uint32_t re
         ++rejected;
         continue;
       }
-      out.push_back(Clip{rec_index, static_cast<std::uint32_t>(first), segment, index,
-                         clip_label(k, rec, first, r, benchmark)});
+      Clip clip{rec_index, static_cast<std::uint32_t>(first), segment, index,
+                clip_label(k, rec, first, r, benchmark)};
+      if (benchmark) {
+        const std::int64_t last_frame = k.frame_idx[rec.rows[first + static_cast<std::size_t>(r.L) - 1]];
+        clip.time_to_event = static_cast<std::int32_t>(rec.event_frame - last_frame);
+      }
+      out.push_back(clip);
     }
     ++segment;
     seg_begin = i + 1;

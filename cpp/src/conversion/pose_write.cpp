@@ -231,7 +231,7 @@ void write_clip_meta(const h5::Group& g, const PoseTable& t, const Plan& plan,
                      const std::vector<Clip>& clips, int L) {
   const std::size_t N = clips.size();
   std::vector<std::string> video(N), ped(N), age(N), gender(N), model(N), map(N);
-  std::vector<std::int32_t> clip_id(N), segment(N);
+  std::vector<std::int32_t> clip_id(N), segment(N), tte(N);
   std::vector<std::int64_t> start(N), end(N), width(N), height(N);
   std::vector<std::uint8_t> label(N);
   std::vector<float> cam(N * 6);
@@ -243,7 +243,7 @@ void write_clip_meta(const h5::Group& g, const PoseTable& t, const Plan& plan,
     ped[i] = std::to_string(rec.camera_idx) + "_" + std::to_string(rec.pedestrian_idx);
     age[i] = str_at(t.age, first), gender[i] = str_at(t.gender, first);
     model[i] = str_at(t.model, first), map[i] = str_at(t.map, first);
-    clip_id[i] = c.index, segment[i] = c.segment, label[i] = c.label;
+    clip_id[i] = c.index, segment[i] = c.segment, label[i] = c.label, tte[i] = c.time_to_event;
     start[i] = t.frame_idx[first], end[i] = t.frame_idx[last] + 1;
     width[i] = t.camera_width[first], height[i] = t.camera_height[first];
     std::copy_n(&t.camera_transform[first * 6], 6, &cam[i * 6]);
@@ -272,6 +272,7 @@ void write_clip_meta(const h5::Group& g, const PoseTable& t, const Plan& plan,
   put_m("clip_width", h5::Type::I64, {N}, width.data());
   put_m("clip_height", h5::Type::I64, {N}, height.data());
   put_m("camera_transform", h5::Type::F32, {N, 6}, cam.data());
+  put_m("tte", h5::Type::I32, {N}, tte.data());  // kNoEvent (-1) outside benchmark mode
 }
 
 }  // namespace bsp::detail

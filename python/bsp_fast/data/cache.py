@@ -73,12 +73,15 @@ def stale_reason(h5_path: Path, settings: dict, csv: Path) -> str | None:
             stored = json.loads(f.attrs.get("settings_json", "{}"))
             size = int(f.attrs.get("source_bytes", -1))
             crc = int(f.attrs.get("source_crc32", -1))
+            no_tte = "test" in f and "meta/tte" not in f["test"]
     except MissingShardError as exc:
         return f"its shard files are missing ({exc})"
     except (OSError, ValueError) as exc:
         return f"unreadable ({exc})"
     if stored != settings:
         return "converted with other options: " + describe_difference(stored, settings)
+    if no_tte and settings.get("benchmark"):
+        return "written before the time to event (meta/tte) of benchmark windows was stored"
     st = csv.stat()
     if st.st_size != size:
         return f"{csv} changed size ({size} -> {st.st_size} bytes)"

@@ -290,6 +290,8 @@ class BSPDataModule(_Base):
         jitter, noise = extra.pop("box_jitter", None), extra.pop("box_noise", None)
         if (jitter if train else noise):
             options["box_noise"] = tuple(jitter if train else noise)
+        if not train:  # augmentation asked for here (pose_estimation's) is train-time only
+            extra.pop("augment", None)
         options.update(extra)
         return ClipDataset(self.h5_path, split, self.task, **options)
 

@@ -22,13 +22,16 @@ from . import images as I
 from . import transforms as T
 from .base import DEFAULT_EVAL_SEED, SPLITS, Rows, SplitDataset, choice, plain
 
-__all__ = ["ClipDataset", "TASKS", "SPLITS", "LIFTING_TARGETS", "DEFAULT_EVAL_SEED"]
+__all__ = ["ClipDataset", "TASKS", "SPLITS", "LIFTING_TARGETS", "DEFAULT_EVAL_SEED",
+           "NO_EVENT"]
 
 TASKS = ("classification", "autoencoder", "lifting", "pose_estimation")
 LIFTING_TARGETS = ("absolute", "world", "camera")
 AUGMENTED_TASKS = ("classification", "autoencoder")  # 2D flips/rotations; images: pose
 _META_STR = ("video_id", "pedestrian_id", "age", "gender")
 _META_INT = ("clip_id", "start_frame", "end_frame")
+#: ``meta/tte`` of a clip without an event (not a benchmark window), as the C++ kNoEvent
+NO_EVENT = -1
 MEDIA_DATASETS = ("frames/rgb", "frames/crop_box", "frames/joint_visible", "clip_frames")
 CONTEXT_DATASETS = ("frames/context_rgb", "frames/context_box")
 
@@ -51,8 +54,9 @@ class ClipDataset(SplitDataset):
     one number or 26) deform the 2D inputs only. ``augment`` (default: True for the train
     split of the 2D tasks) flips with probability ``flip_p`` and rotates by up to
     ``rotation`` degrees; for ``pose_estimation`` (off by default) it flips, zooms
-    (``image_scale``), shifts (``image_shift``) and colour-jitters the crops with the
-    joints (:class:`~bsp_fast.data.images.ImageAugment`). ``image_dtype="float32"`` gives
+    (``image_scale``), shifts (``image_shift``), rotates (``image_rotation`` degrees,
+    default 0) and colour-jitters the crops with the joints
+    (:class:`~bsp_fast.data.images.ImageAugment`). ``image_dtype="float32"`` gives
     crops on [0, 1], ``mean``/``std`` normalise them per channel. Randomness depends on
     ``(seed, epoch, batch indices)``; the train split's ``seed`` defaults to one derived
     from torch's initial seed (``seed_everything`` fixes it), val and test use ``seed``
@@ -78,7 +82,7 @@ class ClipDataset(SplitDataset):
                  with_pixels: bool = False, indices=None, image_dtype: str = "uint8",
                  mean=None, std=None, image_scale: float = 0.1, image_shift: float = 0.05,
                  color_jitter: float = 0.2, transform=None, target_transform=None,
-                 box_noise=None):
+                 box_noise=None, image_rotation: float = 0.0):
         choice("task", task, TASKS)
         choice("lifting_target", lifting_target, LIFTING_TARGETS)
         self._init_common(h5_path, split, seed, transform, target_transform)
@@ -104,7 +108,8 @@ class ClipDataset(SplitDataset):
         if self.box_noise and task != "pose_estimation":
             raise ValueError("box_noise perturbs the crop boxes of pose_estimation only")
         if task == "pose_estimation":
-            self._augment = I.ImageAugment(flip_p, image_scale, image_shift, color_jitter)
+            self._augment = I.ImageAugment(flip_p, image_scale, image_shift, color_jitter,
+                                           image_rotation)
         else:
             self._augment = T.RandomFlipRotate(flip_p, rotation)  # = Compose([flip, rotation])
         self._read_header(indices, balance)
@@ -132,6 +137,11 @@ class ClipDataset(SplitDataset):
             self._labels = g["labels"][()].astype(np.int64)
             self._meta = {k: g[f"meta/{k}"].asstr()[()].astype(object) for k in _META_STR}
             self._meta.update({k: g[f"meta/{k}"][()].astype(np.int64) for k in _META_INT})
+            # time to event (benchmark windows); a file written before meta/tte existed
+            # reads as clips without an event, and says so (has_tte, tte_problem)
+            self.has_tte = "meta/tte" in g
+            self._tte = (g["meta/tte"][()].astype(np.int64) if self.has_tte
+                         else np.full(len(self._labels), NO_EVENT, np.int64))
             self._width = g["meta/clip_width"][()].astype(np.float32)
             if self.lifting_target == "camera" and self.task == "lifting":
                 cam = g["meta/camera_transform"][()].astype(np.float64)
@@ -186,6 +196,16 @@ class ClipDataset(SplitDataset):
         """Crossing labels of every clip of this dataset, in index order."""
         return self._labels[self._rows]
 
+    @property
+    def time_to_event(self) -> np.ndarray:
+        """Frames from each clip's last frame to its event (``meta/tte``), in index order;
+        :data:`NO_EVENT` for a clip without one (see :meth:`tte_problem`)."""
+        return self._tte[self._rows]
+
+    def tte_problem(self) -> str | None:
+        """Why this dataset's clips have no time to event (None: every clip has one)."""
+        return tte_problem(self.h5_path, self.has_tte, self.time_to_event, self.attrs)
+
     def __repr__(self) -> str:
         return (f"ClipDataset({self.h5_path!r}, split={self.split!r}, task={self.task!r}, "
                 f"clips={len(self)}, L={self.clip_length}, noise={self.noise}, "
@@ -202,6 +222,7 @@ class ClipDataset(SplitDataset):
         if self.task == "classification":
             out["targets"] = out["label"]
         meta = {k: self._meta[k][rows] for k in _META_INT}
+        meta["tte"] = self._tte[rows]
         meta["frames"] = reader.read(self._dataset("targets/frame_idx"))
         strings = {k: self._meta[k][rows].tolist() for k in _META_STR}
         return out, meta, strings, channels_last
@@ -270,6 +291,22 @@ class ClipDataset(SplitDataset):
         rgb[moved] = I.recrop(ctx.reshape((B, L) + ctx.shape[1:])[moved], cbox[moved],
                               new[moved], S)
         return rgb, np.where(moved[..., None], new, box).astype(np.float32)
+
+
+def tte_problem(path, has_tte: bool, tte: np.ndarray, attrs: dict) -> str | None:
+    """Why the clips of ``path`` (``tte``: their ``meta/tte``) have no time to event, in
+    words that say what to do; None when every clip has one."""
+    if not has_tte:
+        return (f"{path} has no meta/tte: it was written before the time to event was "
+                "stored; convert it again (bsp-convert --benchmark, or bsp-interop "
+                "import jaad|pie)")
+    missing = int((tte < 0).sum())
+    if missing == len(tte) and not int(attrs.get("benchmark", 0)):
+        return (f"{path} holds no benchmark windows (converted without --benchmark), so "
+                "its clips have no event")
+    if missing:
+        return f"{path}: {missing} of {len(tte)} clips have no time to event (meta/tte < 0)"
+    return None
 
 
 def pose_crops(rgb, box, pixels, vis, mask, ds, rng) -> tuple:

@@ -26,8 +26,9 @@ class FrameDataset(SplitDataset):
     ``with_pixels``; ``meta``: ``frame`` (row of the frame table), ``frame_idx``,
     ``clip_row`` and ``clip_frame`` (where the joints come from), ``video_id``,
     ``pedestrian_id``, ``age``, ``gender``. ``augment`` (default: True for ``train``) flips,
-    zooms, shifts and colour-jitters each crop with its joints (``flip_p``, ``image_scale``,
-    ``image_shift``, ``color_jitter``). Seeds, ``transform``/``target_transform``,
+    zooms, shifts, rotates and colour-jitters each crop with its joints (``flip_p``,
+    ``image_scale``, ``image_shift``, ``image_rotation`` (degrees, default 0),
+    ``color_jitter``). Seeds, ``transform``/``target_transform``,
     ``ds[i]``/``ds[list]`` and ``loader()`` work as in :class:`ClipDataset`.
     """
 
@@ -37,11 +38,13 @@ class FrameDataset(SplitDataset):
                  flip_p: float = 0.5, image_scale: float = 0.1, image_shift: float = 0.05,
                  color_jitter: float = 0.2, image_dtype: str = "uint8", mean=None, std=None,
                  seed: int | None = None, with_mask: bool = False, with_pixels: bool = False,
-                 indices=None, transform=None, target_transform=None):
+                 indices=None, transform=None, target_transform=None,
+                 image_rotation: float = 0.0):
         self._init_common(h5_path, split, seed, transform, target_transform)
         self.image_dtype, self.mean, self.std = I.check_image_options(image_dtype, mean, std)
         self.augment = split == "train" if augment is None else bool(augment)
-        self._augment = I.ImageAugment(flip_p, image_scale, image_shift, color_jitter)
+        self._augment = I.ImageAugment(flip_p, image_scale, image_shift, color_jitter,
+                                       image_rotation)
         self.with_mask, self.with_pixels = bool(with_mask), bool(with_pixels)
         self._read_header(indices)
 

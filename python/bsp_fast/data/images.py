@@ -61,23 +61,27 @@ class ImageAugment:
     mirrored, ``u -> S - u``, joints permuted left/right, visibility with them); a zoom by
     a factor uniform in ``[1 - scale, 1 + scale]`` about the crop centre; a shift uniform
     in ``[-shift, shift] * S`` per axis; brightness, contrast and saturation factors uniform
-    in ``[1 - color_jitter, 1 + color_jitter]``. Pixels are resampled bilinearly (masks:
-    nearest), what falls outside the crop is zero; joints that leave the crop become
-    invisible.
+    in ``[1 - color_jitter, 1 + color_jitter]``; a rotation about the crop centre by an
+    angle uniform in ``[-rotation, rotation]`` degrees (positive: from +u towards +v, as
+    :func:`~bsp_fast.data.functional.rotate`; drawn last and only when ``rotation > 0``, so
+    the other draws of a clip do not change with it). Pixels are resampled bilinearly
+    (masks: nearest), what falls outside the crop is zero; joints that leave the crop
+    become invisible.
     """
 
     def __init__(self, flip_p: float = 0.5, scale: float = 0.1, shift: float = 0.05,
-                 color_jitter: float = 0.2):
+                 color_jitter: float = 0.2, rotation: float = 0.0):
         for name, v, hi in (("flip_p", flip_p, 1.0), ("scale", scale, 0.9),
-                            ("shift", shift, 0.5), ("color_jitter", color_jitter, 1.0)):
-            if not (isinstance(v, (int, float)) and 0 <= v <= hi):
+                            ("shift", shift, 0.5), ("color_jitter", color_jitter, 1.0),
+                            ("rotation", rotation, 180.0)):
+            if isinstance(v, bool) or not (isinstance(v, (int, float)) and 0 <= v <= hi):
                 raise ValueError(f"{name} must lie in [0, {hi}], got {v!r}")
         self.flip_p, self.scale, self.shift = float(flip_p), float(scale), float(shift)
-        self.color_jitter = float(color_jitter)
+        self.color_jitter, self.rotation = float(color_jitter), float(rotation)
 
     def __repr__(self) -> str:
         return (f"ImageAugment(flip_p={self.flip_p}, scale={self.scale}, shift={self.shift}, "
-                f"color_jitter={self.color_jitter})")
+                f"color_jitter={self.color_jitter}, rotation={self.rotation})")
 
     def __call__(self, rgb, joints, visible, mask=None, *, rng: np.random.Generator):
         """``rgb`` (N, K, S, S, 3) uint8 (N clips of K frames), ``joints`` (N, K, J, 2),
@@ -89,12 +93,18 @@ class ImageAugment:
         zoom = 1 + rng.uniform(-self.scale, self.scale, N)
         move = rng.uniform(-self.shift, self.shift, (N, 2)) * S
         jitter = 1 + rng.uniform(-self.color_jitter, self.color_jitter, (N, 3))
-        # pixels: output p maps to input (p - c) / zoom + c - move, mirrored in u if flipped
+        angle = (np.deg2rad(rng.uniform(-self.rotation, self.rotation, N)) if self.rotation
+                 else np.zeros(N))
+        cos, sin = np.cos(angle), np.sin(angle)
+        # joints: q' = zoom * R (flip(q) - c + move) + c; pixels, in [-1, 1] units, the
+        # inverse: output p maps to input flip(R^T (p - c) / zoom + c - move)
         theta = np.zeros((N, 2, 3), np.float32)
         sign = np.where(flip, -1.0, 1.0)
-        theta[:, 0, 0] = sign / zoom
+        theta[:, 0, 0] = sign * cos / zoom
+        theta[:, 0, 1] = sign * sin / zoom
         theta[:, 0, 2] = -sign * 2 * move[:, 0] / S
-        theta[:, 1, 1] = 1 / zoom
+        theta[:, 1, 0] = -sin / zoom
+        theta[:, 1, 1] = cos / zoom
         theta[:, 1, 2] = -2 * move[:, 1] / S
         grid = F.affine_grid(torch.from_numpy(np.repeat(theta, K, 0)), (N * K, 3, S, S),
                              align_corners=False)
@@ -113,7 +123,11 @@ class ImageAugment:
         j[flip, ..., 0] = S - j[flip, ..., 0]
         c = S / 2
         j = (j - c + move[:, None, None, :].astype(np.float32)) \
-            * zoom[:, None, None, None].astype(np.float32) + c
+            * zoom[:, None, None, None].astype(np.float32)
+        if self.rotation:
+            r = np.stack([np.stack([cos, -sin], -1), np.stack([sin, cos], -1)], -2)
+            j = np.einsum("nab,nkjb->nkja", r.astype(np.float32), j)
+        j = j + c
         v &= np.all((j >= 0) & (j <= S), -1)
         return x.reshape(N, K, 3, S, S).numpy(), j, v, mask
 

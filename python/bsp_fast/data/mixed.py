@@ -1,13 +1,15 @@
 """``MixedDataModule``: train on several clip files at once, each source in a stated share
 of every epoch (the report's autoencoder mix: JAAD 10 %, CARLA-BSP 40 %, AMASS 50 %,
-``experiments/mix/autoencoder.yaml``).
+``experiments/mix/autoencoder.yaml``; the tables themselves are :mod:`.mix_tables`).
 
 Every epoch of ``epoch_size`` clips takes ``round(share * epoch_size)`` clips from each
 source (largest remainders, so the counts add up), drawn without replacement inside a
 source while it has clips left (then from a fresh permutation), and shuffles them
 together into batches. The draw is a function of ``(seed, epoch)``: the same seed gives
-the same batches. Validation and test read every source's split in order, one after the
-other. Each batch holds ``meta["source"]`` (the source's index).
+the same batches. Validation reads every source's split in order, one after the other;
+test does too, or reads one named source alone (``test_source``: bsp-train's
+``--test-on``). Each batch of several sources holds ``meta["source"]`` (the source's
+index) and recordings named ``SOURCE:VIDEO`` (two sources may share a video name).
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ import numpy as np
 
 from .._extras import require
 from ..defaults import SEED
+from .mix_tables import MIX_TASKS, check_mix, mix_dirs, mix_table, quotas, read_mix
 from .sampling import IndexBatch, collate_batch, derived_seed
 
 torch = require("torch")
@@ -33,29 +36,19 @@ except ImportError:  # pragma: no cover - depends on the environment
         _Base = object
 
 __all__ = ["MixedDataModule", "MixedDataset", "MixedBatchSampler", "quotas", "read_mix",
-           "mix_table", "mix_dirs"]
-
-MIX_TASKS = ("classification", "autoencoder")
-
-
-def quotas(shares, total: int) -> np.ndarray:
-    """Integer counts proportional to ``shares`` adding up to ``total`` (largest
-    remainders, ties to the earlier source)."""
-    s = np.asarray(shares, np.float64)
-    raw = s / s.sum() * total
-    counts = np.floor(raw).astype(np.int64)
-    order = np.argsort(-(raw - counts), kind="stable")
-    counts[order[:total - counts.sum()]] += 1
-    return counts
+           "mix_table", "mix_dirs", "MIX_TASKS", "check_mix", "check_clip_lengths"]
 
 
 class MixedDataset(torch.utils.data.Dataset):
     """Several :class:`ClipDataset` side by side; global index ``offset[k] + i`` is clip
     ``i`` of source ``k``. ``ds[IndexBatch]`` or ``ds[list]`` returns one collated batch
-    in the order asked, with ``meta["source"]``."""
+    in the order asked, with ``meta["source"]``; with ``names`` (one per dataset) and more
+    than one dataset, ``meta["video_id"]`` is ``NAME:VIDEO``, so recordings of two sources
+    stay apart in per-recording sums."""
 
-    def __init__(self, datasets):
+    def __init__(self, datasets, names=None):
         self.datasets = list(datasets)
+        self.names = None if names is None else [str(n) for n in names]
         if not self.datasets:
             raise ValueError("MixedDataset needs at least one dataset")
         lengths = {d.clip_length for d in self.datasets}
@@ -87,6 +80,9 @@ class MixedDataset(torch.utils.data.Dataset):
         back = np.argsort(np.concatenate(where), kind="stable")
         batch = _concat(parts, torch.from_numpy(back))
         batch["meta"]["source"] = torch.from_numpy(source)
+        if self.names is not None and len(self.datasets) > 1:
+            batch["meta"]["video_id"] = [f"{self.names[k]}:{v}" for k, v in
+                                         zip(source.tolist(), batch["meta"]["video_id"])]
         return batch
 
 
@@ -118,10 +114,15 @@ class MixedBatchSampler:
         empty = [k for k in range(len(self.sizes)) if self.counts[k] and not self.sizes[k]]
         if empty:
             raise ValueError(f"sources {empty} have a share but no clips")
-        self.epoch, self._next = 0, 0
+        self.epoch, self._next, self._skip = 0, 0, None
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = self._next = int(epoch)
+
+    def skip_batches(self, epoch: int, count: int) -> None:
+        """The next iteration over epoch ``epoch`` leaves out its first ``count`` batches
+        (bsp-train resumed mid-epoch: those were trained on before the interruption)."""
+        self._skip = (int(epoch), int(count))
 
     def epoch_indices(self, epoch: int) -> np.ndarray:
         """The shuffled global indices of one epoch (before cutting into batches)."""
@@ -144,7 +145,9 @@ class MixedBatchSampler:
     def __iter__(self):
         epoch = self._next
         self._next = epoch + 1
-        return iter(self.batches(epoch))
+        skip = self._skip[1] if self._skip is not None and self._skip[0] == epoch else 0
+        self._skip = None
+        return iter(self.batches(epoch)[skip:])
 
     def __len__(self) -> int:
         full, rest = divmod(self.epoch_size, self.batch_size)
@@ -163,32 +166,6 @@ class _Sequential:
         return -(-self.n // self.batch_size)
 
 
-def mix_dirs() -> list:
-    """Where mixing tables are looked up by name, in order: ``$BSP_EXPERIMENTS/mix``,
-    ``./experiments/mix``, the tables installed with the package
-    (``bsp_fast/experiments/mix``), the source tree's ``experiments/mix``
-    (:func:`bsp_fast.defaults.experiments_dirs`, as bsp-reproduce's tables)."""
-    from ..defaults import experiments_dirs
-
-    return experiments_dirs("mix")
-
-
-def mix_table(name_or_path) -> Path:
-    """A mixing table's file: a path to a YAML file as is, or a table name
-    (``"autoencoder"``) looked up as ``NAME.yaml`` in :func:`mix_dirs`."""
-    p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml") or p.is_file():
-        if not p.is_file():
-            raise FileNotFoundError(f"mixing table {p} does not exist")
-        return p
-    found = [d / f"{p.name}.yaml" for d in mix_dirs() if (d / f"{p.name}.yaml").is_file()]
-    if not found:
-        names = sorted({f.stem for d in mix_dirs() if d.is_dir() for f in d.glob("*.yaml")})
-        raise FileNotFoundError(f"no mixing table {p.name!r} in {[str(d) for d in mix_dirs()]}"
-                                f"; tables found: {names or 'none'}")
-    return found[0]
-
-
 def _clip_length(h5_path) -> int:
     from ..conversion.vds import open_clip_file
 
@@ -199,16 +176,20 @@ def _clip_length(h5_path) -> int:
         raise ValueError(f"{h5_path}: not a clip file with a clip_length ({exc})") from None
 
 
-def read_mix(path) -> dict:
-    """A mixing table (YAML): ``task``, ``sources`` (``name``, ``share``, optional
-    ``h5_path``), optional ``epoch_size``, ``clip_length``; checked."""
-    import yaml
-
-    with Path(path).open("r", encoding="utf-8") as fh:
-        doc = yaml.safe_load(fh)
-    if not isinstance(doc, dict) or not isinstance(doc.get("sources"), list):
-        raise ValueError(f"{path}: a mixing table needs a 'sources' list")
-    return doc
+def check_clip_lengths(files: dict, want=None, where: str = "mix") -> int:
+    """The clip length all of ``files`` (``{source: clip file}``) hold; ValueError naming
+    each source whose file holds another than ``want`` (the table's, where it gives one)
+    or than the others (a model is trained and scored on one clip length)."""
+    lengths = {n: _clip_length(f) for n, f in files.items()}
+    bad = {n: L for n, L in lengths.items() if want is not None and L != int(want)}
+    if bad:
+        raise ValueError(f"{where}: clip_length {want}, but " + ", ".join(
+            f"source {n!r} ({files[n]}) has {L}" for n, L in bad.items())
+            + f": convert or import {'it' if len(bad) == 1 else 'them'} with --clip-length "
+            f"{want} (bsp-interop import jaad|pie: --obs-length {want})")
+    if len(set(lengths.values())) > 1:
+        raise ValueError(f"{where}: sources have different clip lengths {lengths}")
+    return next(iter(lengths.values()))
 
 
 class MixedDataModule(_Base):
@@ -218,12 +199,20 @@ class MixedDataModule(_Base):
     :class:`MixedBatchSampler` from ``seed`` (default: derived from torch's initial
     seed, so ``seed_everything`` fixes it). ``noise``, ``mjp``, ``augment`` and
     ``dataset_options`` as in :class:`BSPDataModule`; ``task``: classification or
-    autoencoder."""
+    autoencoder.
+
+    ``test_source`` (``{"name", "h5_path"}``): the test split is that file's alone (a
+    source of the mix or another dataset: bsp-train's ``--test-on``); default: every
+    source's. ``base``: a :class:`BSPDataModule` (bsp-train's ``--data``) whose converted
+    file is read by the source (or test source) marked ``"data": True`` with no
+    ``h5_path``; :meth:`prepare_data` converts it. ``clip_length``: what every file must
+    hold, checked with the files against each other when the splits are opened."""
 
     def __init__(self, sources, task: str = "autoencoder", batch_size: int = 256,
                  num_workers: int = 0, *, epoch_size: int | None = None,
                  seed: int | None = None, eval_seed: int = SEED, noise: float = 0.0,
-                 mjp=0.0, augment: bool = True, dataset_options: dict | None = None):
+                 mjp=0.0, augment: bool = True, dataset_options: dict | None = None,
+                 test_source: dict | None = None, base=None, clip_length: int | None = None):
         super().__init__()
         if task not in MIX_TASKS:
             raise ValueError(f"task must be one of {list(MIX_TASKS)} (2D clip tasks), got {task!r}")
@@ -231,9 +220,11 @@ class MixedDataModule(_Base):
         names = [s.get("name") for s in self.sources]
         if not self.sources or len(set(names)) != len(names) or None in names:
             raise ValueError(f"sources need unique names, got {names}")
+        self.test_source = None if test_source is None else dict(test_source)
+        for s in self.sources + ([self.test_source] if self.test_source else []):
+            if s.get("h5_path") is None and not (s.get("data") and base is not None):
+                raise ValueError(f"source {s.get('name')!r} has no h5_path")
         for s in self.sources:
-            if "h5_path" not in s:
-                raise ValueError(f"source {s['name']!r} has no h5_path")
             if not isinstance(s.get("share"), (int, float)) or not s["share"] > 0:
                 raise ValueError(f"source {s['name']!r}: share must be a number > 0, "
                                  f"got {s.get('share')!r}")
@@ -248,6 +239,7 @@ class MixedDataModule(_Base):
         self.seed = seed if seed is not None else derived_seed()
         self.noise, self.mjp, self.augment = noise, mjp, bool(augment)
         self.dataset_options = dict(dataset_options or {})
+        self.base, self.clip_length = base, clip_length
         self.datasets: dict = {}
 
     @classmethod
@@ -264,29 +256,52 @@ class MixedDataModule(_Base):
             raise ValueError(f"{path}: no clip file given for sources {missing} (paths=...)")
         sources = [dict(name=s["name"], share=s["share"], h5_path=str(paths[s["name"]]))
                    for s in doc["sources"]]
-        lengths = {s["name"]: _clip_length(s["h5_path"]) for s in sources}
-        want = doc.get("clip_length")
-        bad = {n: L for n, L in lengths.items() if want is not None and L != int(want)}
-        if bad:
-            raise ValueError(f"{path}: clip_length {want}, but " + ", ".join(
-                f"source {n!r} ({paths[n]}) has {L}" for n, L in bad.items())
-                + ": convert or import it with --clip-length " + str(want))
-        if len(set(lengths.values())) > 1:
-            raise ValueError(f"{path}: sources have different clip lengths {lengths}")
-        options = {k: doc[k] for k in ("task", "epoch_size", "batch_size") if k in doc}
+        check_clip_lengths({s["name"]: s["h5_path"] for s in sources}, doc.get("clip_length"),
+                           str(path))
+        options = {k: doc[k] for k in ("task", "epoch_size", "clip_length") if k in doc}
         options.update(overrides)
         return cls(sources, **options)
 
+    @property
+    def h5_path(self):
+        """The file a run names as its data: the converted ``base`` when a source reads it,
+        else the test source's file, else the first source's."""
+        if self.base is not None:
+            return self.base.h5_path
+        return Path((self.test_source or self.sources[0])["h5_path"])
+
+    def _fill(self) -> None:
+        for s in self.sources + ([self.test_source] if self.test_source else []):
+            if s.get("data") and self.base is not None:
+                s["h5_path"] = str(self.base.h5_path)
+
+    def prepare_data(self) -> None:
+        """Converts ``base`` (when given; reused when up to date) for its source."""
+        if self.base is not None:
+            self.base.prepare_data()
+        self._fill()
+
     def setup(self, stage: str | None = None) -> None:
+        self._fill()
+        if not self.datasets:
+            files = {s["name"]: s["h5_path"] for s in self.sources}
+            if self.test_source:
+                files[self.test_source["name"]] = self.test_source["h5_path"]
+            check_clip_lengths(files, self.clip_length)
         for split in ("train", "val", "test"):
-            if split not in self.datasets:
-                train = split == "train"
-                opts = dict(noise=self.noise, mjp=self.mjp,
-                            seed=self.seed if train else self.eval_seed,
-                            augment=self.augment and train)
-                opts.update(self.dataset_options)
-                self.datasets[split] = MixedDataset(
-                    [ClipDataset(s["h5_path"], split, self.task, **opts) for s in self.sources])
+            if split in self.datasets:
+                continue
+            train = split == "train"
+            opts = dict(noise=self.noise, mjp=self.mjp,
+                        seed=self.seed if train else self.eval_seed,
+                        augment=self.augment and train)
+            opts.update(self.dataset_options)
+            chosen = [self.test_source] if split == "test" and self.test_source else self.sources
+            sets = [ClipDataset(s["h5_path"], split, self.task, **opts) for s in chosen]
+            # one file to score: its own dataset (its rows, file and recordings, as a run
+            # on that file alone has them); train always mixed (the sampler's indices)
+            self.datasets[split] = sets[0] if len(sets) == 1 and not train else \
+                MixedDataset(sets, [s["name"] for s in chosen])
 
     def _loader(self, split: str, sampler):
         return torch.utils.data.DataLoader(self.datasets[split], sampler=sampler,
@@ -312,3 +327,5 @@ class MixedDataModule(_Base):
         self.setup("test")
         return self._loader("test", _Sequential(len(self.datasets["test"]), self.batch_size))
 
+    def predict_dataloader(self):
+        return self.test_dataloader()

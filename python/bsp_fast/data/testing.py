@@ -122,6 +122,7 @@ def _write_split(g, recs, clips, L, chunk, media: dict | None, rotations: bool =
     put("meta/clip_width", np.full(n, _W, np.int64))
     put("meta/clip_height", np.full(n, _H, np.int64))
     put("meta/camera_transform", np.tile(_CAMERA, (n, 1)))
+    put("meta/tte", np.full(n, -1, np.int32))  # not benchmark windows: no event
     g.attrs["class_counts"] = np.bincount(labels, minlength=2).astype(np.int64)
     g.attrs["recordings"] = len(set(clips["rec"].tolist()))
     if media is not None:

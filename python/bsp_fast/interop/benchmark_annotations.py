@@ -350,8 +350,9 @@ def _regroup(src, dst, fixed: dict, events: dict, info: dict, filled) -> dict:
         origin = np.concatenate([[s] * len(f[s]["labels"]) for s in SPLITS]).astype(object)
         video, track = cat["meta/video_id"], cat["meta/pedestrian_id"]
         split = np.array([fixed.get(v, o) for v, o in zip(video, origin)], object)
-        cat["meta/tte"] = np.array([events[(v, t)] for v, t in zip(video, track)], np.int64) \
-            - (cat["meta/end_frame"] - 1)
+        # int32 as bsp-convert writes it (docs/hdf5-schema.md, "Time to event")
+        cat["meta/tte"] = (np.array([events[(v, t)] for v, t in zip(video, track)], np.int64)
+                           - (cat["meta/end_frame"] - 1)).astype(np.int32)
         for k, v in f.attrs.items():
             g.attrs[k] = v
         report = dict(clips={}, class_counts={}, missing_joints={})

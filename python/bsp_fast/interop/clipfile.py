@@ -158,7 +158,8 @@ def _split_arrays(plan: dict, split: str, rows: dict, L: int) -> dict:
                 bboxes=np.stack([lo, hi], -2).astype(np.float32),
                 is_crossing=rows["crossing"][idx], frames=rows["frame"][idx],
                 labels=np.asarray(p["label"], np.uint8), clip_id=np.asarray(p["index"], np.int32),
-                segment=np.asarray(p["segment"], np.int32))
+                segment=np.asarray(p["segment"], np.int32),
+                tte=np.asarray(p["time_to_event"], np.int32))
 
 
 def _write(path, plan: dict, rows: dict, names: dict, st: dict, report: dict, m) -> None:
@@ -189,6 +190,7 @@ def _write(path, plan: dict, rows: dict, names: dict, st: dict, report: dict, m)
                                    else np.zeros(0, np.int64))
             g["meta/clip_width"] = rows["width"][first].astype(np.int64)
             g["meta/clip_height"] = rows["height"][first].astype(np.int64)
+            g["meta/tte"] = a["tte"]  # the planner's time to event; -1 without --benchmark
             counts = np.bincount(a["labels"], minlength=2).astype(np.int64)
             g.attrs["class_counts"] = counts
             g.attrs["recordings"] = len(plan[split]["recordings"])

@@ -2,7 +2,8 @@
 
 Functional forms take NumPy arrays or torch tensors and return the same kind (a NumPy
 float64 scalar, or a 0-d float64 tensor on the input's device), accumulating in float64.
-Streaming forms (``torchmetrics.Metric`` subclasses: ``ClassificationMetrics`` (a dict) or,
+Streaming forms (``torchmetrics.Metric`` subclasses: ``ClassificationMetrics`` (a dict),
+``RankingMetrics`` (exact AUROC and AP, :mod:`.ranking`, from the clips it keeps) or,
 torchmetrics-style, ``BinaryF1Score``, ``BinaryPrecision``, ``BinaryRecall``,
 ``BinaryAccuracy`` and their ``classification_collection()``; ``PCK``,
 ``MPJPE``, ``NMPJPE``, ``PAMPJPE``, ``MPJVE``, ``MaskedMSE``, ``MissingJointRatio``) sum
@@ -24,8 +25,8 @@ from .pose2d import PCKCounts, masked_mse, missing_joint_ratio, pck, pck_counts,
 from .pose3d import denormalise_lifting, mpjpe, mpjve, n_mpjpe, pa_mpjpe, root_align
 from .threshold_free import auroc, average_precision, pck_auc, pck_curve
 
-_STREAMING = ("ClassificationMetrics", "BinaryF1Score", "BinaryPrecision", "BinaryRecall",
-              "BinaryAccuracy", "classification_collection", "PCK", "MPJPE", "NMPJPE", "PAMPJPE", "MPJVE",
+_STREAMING = ("ClassificationMetrics", "RankingMetrics", "BinaryF1Score", "BinaryPrecision",
+              "BinaryRecall", "BinaryAccuracy", "classification_collection", "PCK", "MPJPE", "NMPJPE", "PAMPJPE", "MPJVE",
               "MaskedMSE", "MissingJointRatio", "PCKPerJoint", "FrameCount")
 
 __all__ = [

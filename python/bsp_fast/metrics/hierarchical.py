@@ -1,42 +1,214 @@
-"""Intervals over training seeds *and* test recordings (#37): a two-level bootstrap.
+"""Intervals and tests over training seeds *and* test recordings (#37): a two-level bootstrap.
 
 :mod:`.uncertainty` resamples the test recordings with the seeds held fixed, so the
 seed-to-seed spread of a row (often the largest source here) is outside its intervals.
 Here both vary, as the data were made: each bootstrap replicate draws the test recordings
-with replacement (one draw shared by every row, so comparisons of rows scored on the same
-recordings stay paired) and, for every row independently, its seeds with replacement; a
-row's value in a replicate is the mean over its drawn seeds of ``sum(num) / sum(den)``
-over the drawn recordings (every metric is such a ratio, :mod:`.uncertainty`). Intervals
-are percentile intervals of ``fn`` over the replicates. Pure functions over arrays, no
-training code (the layout of rliable's ``library.py``); how well the intervals cover is
-measured by :func:`simulate_coverage` (``experiments/coverage_simulation.py``,
-docs/reproduce.md).
+with replacement (one draw shared by every row of one test set, so comparisons of rows
+scored on the same recordings stay paired; rows of different test sets are drawn
+independently) and, for every row, its seeds with replacement (rows that are the same runs,
+e.g. a model and its trivial baseline, share one seed draw). A row's value in a replicate is
+the mean over its drawn seeds of each seed's value on the drawn recordings: ``sum(num) /
+sum(den)`` for the ratio metrics (:class:`Ratios`), or a function of the drawn recordings'
+clips for the per-clip ones such as AUROC (:class:`Clips`).
+
+Methods: ``percentile`` (quantiles of the replicates), ``corrected`` (each row's seed
+deviations scaled by sqrt(S / (S - 1)), the bootstrap's known shrinkage of a mean's
+variance over S seeds) and ``t`` (value ± a t quantile with sum(S - 1) degrees of freedom
+times the corrected replicates' standard deviation; its p-value is the matching t test).
+:func:`simulate_coverage` measures how well they cover (``experiments/coverage_simulation.py``,
+docs/reproduce.md): only ``t`` reaches 93-97 % at the tables' 3-10 seeds, so the tables use
+it. Pure functions over arrays, no training code (the layout of rliable's ``library.py``).
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
+import warnings
 
 import numpy as np
 
 from ..defaults import SEED
 from .uncertainty import CONFIDENCE, N_RESAMPLES, Interval
 
-__all__ = ["seed_recording_interval", "probability_of_improvement", "simulate_coverage",
-           "row_values", "METHODS"]
+__all__ = ["Ratios", "Clips", "Test", "two_level", "seed_recording_interval",
+           "probability_of_improvement", "simulate_coverage", "row_values", "METHODS",
+           "LEVELS"]
+
+METHODS = ("percentile", "corrected", "t")
+#: ``both``: seeds and recordings resampled; ``seeds``: seeds only, the recordings fixed
+LEVELS = ("both", "seeds")
 
 
-def _rows(rows) -> list:
+class Ratios:
+    """A row whose metric is a ratio of sums: ``num``, ``den`` of shape (seeds, recordings);
+    a seed's value on recordings drawn ``counts`` times is ``sum(counts * num) /
+    sum(counts * den)``, ``empty`` where that denominator is 0."""
+
+    def __init__(self, num, den, empty: float = float("nan")):
+        self.num, self.den = np.asarray(num, np.float64), np.asarray(den, np.float64)
+        if self.num.ndim != 2 or self.num.shape != self.den.shape:
+            raise ValueError(f"num and den must be (seeds, recordings) arrays of one shape, "
+                             f"got {self.num.shape} and {self.den.shape}")
+        self.shape, self.empty = self.num.shape, float(empty)
+
+    def values(self, counts: np.ndarray) -> np.ndarray:
+        """(B, S) values for (B, R) recording counts."""
+        n, d = counts @ self.num.T, counts @ self.den.T
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(d > 0, n / np.where(d > 0, d, 1.0), self.empty)
+
+
+class Clips:
+    """A row whose metric is not a ratio of per-recording sums (AUROC, average precision):
+    ``clips[s][r]`` is ``(scores, labels)`` of seed s on recording r; a seed's value on
+    drawn recordings is ``fn(scores, labels)`` of the drawn recordings' clips concatenated
+    (a recording drawn k times counts k times), ``empty`` where ``fn`` raises
+    ``ValueError`` (e.g. one class only)."""
+
+    def __init__(self, clips, fn, empty: float = float("nan")):
+        self.clips = [[(np.asarray(s, np.float64).ravel(), np.asarray(y).ravel())
+                       for s, y in seed] for seed in clips]
+        if not self.clips or len({len(c) for c in self.clips}) != 1:
+            raise ValueError("clips must hold one list per seed, each with one (scores, "
+                             "labels) pair per recording")
+        self.shape, self.fn, self.empty = (len(self.clips), len(self.clips[0])), fn, empty
+
+    def _one(self, seed: list, counts: np.ndarray) -> float:
+        take = np.flatnonzero(counts)
+        scores = np.concatenate([np.repeat(seed[r][0], int(counts[r])) for r in take])
+        labels = np.concatenate([np.repeat(seed[r][1], int(counts[r])) for r in take])
+        try:
+            return float(self.fn(scores, labels))
+        except ValueError:
+            return self.empty
+
+    def values(self, counts: np.ndarray) -> np.ndarray:
+        return np.array([[self._one(seed, c) for seed in self.clips] for c in counts])
+
+
+@dataclass(frozen=True)
+class Test(Interval):
+    """An :class:`Interval` with the test of "the statistic is 0" that matches it: ``p``
+    two-sided (``t``: the t test with ``df`` degrees of freedom and standard error ``se``;
+    otherwise twice the share of replicates beyond 0), NaN when undefined."""
+    p: float = float("nan")
+    se: float = float("nan")
+    df: int = 0
+
+
+def _part(p):
+    return p if isinstance(p, (Ratios, Clips)) else Ratios(*p)
+
+
+def _draws(parts, groups, seed_keys, n_resamples: int, rng, levels: str) -> tuple:
+    """``(counts, seeds)``: per part its (B, R) recording counts (one draw per group, in the
+    order groups first appear; all ones for ``levels='seeds'``) and its (B, S) drawn seed
+    indices (one draw per seed key)."""
+    counts, by_group = [], {}
+    for p, g in zip(parts, groups):
+        R = p.shape[1]
+        if g not in by_group:
+            if levels == "seeds":
+                by_group[g] = np.ones((1, R))
+            else:
+                rec = rng.integers(0, R, size=(n_resamples, R))
+                flat = (rec + R * np.arange(n_resamples)[:, None]).ravel()
+                by_group[g] = np.bincount(flat, minlength=n_resamples * R).reshape(
+                    n_resamples, R).astype(np.float64)
+        if by_group[g].shape[1] != R:
+            raise ValueError(f"rows of one test set must be aligned on the same recordings "
+                             f"(one column each), got {by_group[g].shape[1]} and {R}")
+        counts.append(by_group[g])
+    seeds, by_key = [], {}
+    for p, k in zip(parts, seed_keys):
+        S = p.shape[0]
+        if k not in by_key:
+            by_key[k] = rng.integers(0, S, size=(n_resamples, S))
+        if by_key[k].shape[1] != S:
+            raise ValueError(f"rows that share seeds must have as many: {by_key[k].shape[1]} "
+                             f"and {S}")
+        seeds.append(by_key[k])
+    return counts, seeds
+
+
+def _per_seed(parts, counts, seeds) -> list:
+    """``[(every, drawn)]``: each part's (B, S) values of all its seeds on the drawn
+    recordings, and of its drawn seeds."""
     out = []
-    for k, (num, den) in enumerate(rows):
-        num, den = np.asarray(num, np.float64), np.asarray(den, np.float64)
-        if num.ndim != 2 or num.shape != den.shape:
-            raise ValueError(f"row {k}: num and den must be (seeds, recordings) arrays of one "
-                             f"shape, got {num.shape} and {den.shape}")
-        out.append((num, den))
-    if not out:
-        raise ValueError("no rows")
-    if len({n.shape[1] for n, _ in out}) != 1:
-        raise ValueError("rows must be aligned on the same recordings (one column each): "
-                         + ", ".join(str(n.shape) for n, _ in out))
+    for p, c, s in zip(parts, counts, seeds):
+        every = np.broadcast_to(p.values(c), s.shape)
+        out.append((every, np.take_along_axis(every, s, axis=1)))
     return out
+
+
+def _setup(rows, groups, seed_keys) -> tuple:
+    parts = [_part(p) for p in rows]
+    if not parts:
+        raise ValueError("no rows")
+    groups = [0] * len(parts) if groups is None else list(groups)
+    keys = list(range(len(parts))) if seed_keys is None else list(seed_keys)
+    if len(groups) != len(parts) or len(keys) != len(parts):
+        raise ValueError(f"groups and seed_keys need one entry per row ({len(parts)})")
+    return parts, groups, keys
+
+
+def _mean(a, axis):
+    """``nanmean`` without its warning for a slice of NaN only (its value is then NaN)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(a, axis=axis)
+
+
+def two_level(rows, fn=lambda v: v[0], *, groups=None, seed_keys=None,
+              confidence: float = CONFIDENCE, n_resamples: int = N_RESAMPLES,
+              seed: int = SEED, method: str = "t", levels: str = "both") -> Test:
+    """The value, interval and test of ``fn(row values)``. ``rows``: :class:`Ratios`,
+    :class:`Clips` or ``(num, den)`` pairs of shape (seeds, recordings); a row's value is
+    its mean over seeds. ``fn`` takes the list of row values (floats, or arrays of
+    replicates: it must work elementwise, e.g. ``lambda v: v[0] - v[1]``). ``groups``: one
+    test-set key per row (rows of one key share their recordings' columns and draw;
+    default: one test set); ``seed_keys``: one key per row, rows of one key share their
+    seed draw (the same runs; default: every row its own). ``levels``: :data:`LEVELS`.
+    ``n``: the smallest test set's recordings. NaN bounds and p with fewer than two
+    recordings, or (``t``) when no row has two seeds."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {list(METHODS)}, got {method!r}")
+    if levels not in LEVELS:
+        raise ValueError(f"levels must be one of {list(LEVELS)}, got {levels!r}")
+    parts, groups, keys = _setup(rows, groups, seed_keys)
+    full = [_mean(p.values(np.ones((1, p.shape[1]))), 1)[0] for p in parts]
+    value = float(fn(full))
+    R = min(p.shape[1] for p in parts)
+    df = sum(dict((k, p.shape[0] - 1) for p, k in zip(parts, keys)).values())
+    undefined = Test(value, float("nan"), float("nan"), R, df=df)
+    if R < 2 or (method == "t" and df < 1):
+        return undefined
+    counts, seeds = _draws(parts, groups, keys, n_resamples, np.random.default_rng(seed),
+                           levels)
+    reps = []
+    for p, (every, drawn) in zip(parts, _per_seed(parts, counts, seeds)):
+        mean, S = _mean(drawn, 1), p.shape[0]
+        if method != "percentile" and S > 1:
+            everyone = _mean(every, 1)
+            mean = everyone + np.sqrt(S / (S - 1)) * (mean - everyone)
+        reps.append(mean)
+    reps = np.asarray(fn(reps), np.float64)
+    reps = reps[np.isfinite(reps)]
+    if reps.size < 2 or not np.isfinite(value):
+        return undefined
+    alpha = (1 - confidence) / 2
+    if method == "t":
+        from .._extras import require
+
+        t = require("scipy.stats", "seed and recording intervals").t
+        se = float(np.std(reps, ddof=1))
+        half = float(t.ppf(1 - alpha, df)) * se
+        # a zero-width interval (no variance at either level) decides by the value alone
+        tiny = 1e-12 * max(1.0, abs(value))
+        p = float(2 * t.sf(abs(value) / se, df)) if se > tiny else float(abs(value) <= tiny)
+        return Test(value, value - half, value + half, R, p, se, df)
+    low, high = np.quantile(reps, [alpha, 1 - alpha])
+    p = min(1.0, 2 * min(float(np.mean(reps <= 0)), float(np.mean(reps >= 0))))
+    return Test(value, float(low), float(high), R, p, float(np.std(reps, ddof=1)), df)
 
 
 def row_values(num, den) -> np.ndarray:
@@ -46,97 +218,47 @@ def row_values(num, den) -> np.ndarray:
         return num.sum(-1) / den.sum(-1)
 
 
-def _per_seed(rows: list, n_resamples: int, rng) -> tuple:
-    """``(rec, [(B, S) values])``: per replicate the drawn recordings (one draw for every
-    row), and each row's drawn seeds' values ``sum(num) / sum(den)`` over them."""
-    R = rows[0][0].shape[1]
-    rec = rng.integers(0, R, size=(n_resamples, R))
-    out = []
-    for num, den in rows:
-        seeds = rng.integers(0, num.shape[0], size=(n_resamples, num.shape[0]))
-        n = num[seeds[:, :, None], rec[:, None, :]].sum(-1)  # (B, S) over drawn recordings
-        d = den[seeds[:, :, None], rec[:, None, :]].sum(-1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out.append(n / d)
-    return rec, out
-
-
-def _replicates(rows: list, n_resamples: int, rng, correct: bool = False) -> list:
-    """``[(B,) row values]``: the mean of each row's drawn seeds (:func:`_per_seed`).
-    ``correct``: each row's seed-resampling deviation (from the mean of all its seeds on
-    the same drawn recordings) scaled by sqrt(S / (S - 1)), the bootstrap's known
-    shrinkage of a mean's variance over S seeds."""
-    rec, per_seed = _per_seed(rows, n_resamples, rng)
-    out = []
-    for (num, den), values in zip(rows, per_seed):
-        S = num.shape[0]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            drawn = np.nanmean(values, axis=1)
-            if correct and S > 1:
-                every = np.nanmean(num[:, rec].sum(-1) / den[:, rec].sum(-1), axis=0)
-                drawn = every + np.sqrt(S / (S - 1)) * (drawn - every)
-        out.append(drawn)
-    return out
-
-
-METHODS = ("percentile", "corrected", "t")
-
-
 def seed_recording_interval(rows, fn=lambda v: v[0], *, confidence: float = CONFIDENCE,
                             n_resamples: int = N_RESAMPLES, seed: int = SEED,
-                            method: str = "percentile") -> Interval:
-    """The value and interval of ``fn(row values)`` where ``rows`` are ``(num, den)``
-    arrays of shape (seeds, recordings), aligned on the same recordings, and a row's value
-    is its mean over seeds of ``sum(num) / sum(den)``. ``fn`` takes the list of row values
-    (floats, or arrays of replicates: it must work elementwise, e.g. ``lambda v: v[0] -
-    v[1]``). ``method``: ``percentile`` (quantiles of the replicates), ``corrected`` (the
-    same with each row's seed deviations scaled by sqrt(S / (S - 1))) or ``t`` (value ±
-    a t quantile with sum(S - 1) degrees of freedom times the corrected replicates' standard
-    deviation). ``n``: the recordings. NaN bounds with fewer than two recordings."""
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {list(METHODS)}, got {method!r}")
-    rows = _rows(rows)
-    value = float(fn([float(np.mean(row_values(n, d))) for n, d in rows]))
-    R = rows[0][0].shape[1]
-    if R < 2:
-        return Interval(value, float("nan"), float("nan"), R)
-    reps = np.asarray(fn(_replicates(rows, n_resamples, np.random.default_rng(seed),
-                                     correct=method != "percentile")), np.float64)
-    reps = reps[np.isfinite(reps)]
-    if reps.size < 2:
-        return Interval(value, float("nan"), float("nan"), R)
-    alpha = (1 - confidence) / 2
-    if method == "t":
-        from .._extras import require
-
-        df = max(1, sum(n.shape[0] - 1 for n, _ in rows))
-        half = require("scipy.stats", "seed and recording intervals").t.ppf(1 - alpha, df) \
-            * float(np.std(reps, ddof=1))
-        return Interval(value, value - half, value + half, R)
-    low, high = np.quantile(reps, [alpha, 1 - alpha])
-    return Interval(value, float(low), float(high), R)
+                            method: str = "percentile") -> Test:
+    """:func:`two_level` for rows on one test set, each with its own seeds (the coverage
+    simulation's case)."""
+    rows = [_part(r) for r in rows]
+    if len({r.shape[1] for r in rows}) > 1:
+        raise ValueError("rows must be aligned on the same recordings (one column each): "
+                         + ", ".join(str(r.shape) for r in rows))
+    return two_level(rows, fn, confidence=confidence, n_resamples=n_resamples, seed=seed,
+                     method=method)
 
 
-def probability_of_improvement(a, b, better: int = 1, *, confidence: float = CONFIDENCE,
+def probability_of_improvement(a, b, better: int = 1, *, groups=None, seed_keys=None,
+                               confidence: float = CONFIDENCE,
                                n_resamples: int = N_RESAMPLES, seed: int = SEED) -> Interval:
     """P(a run of row ``a`` beats a run of row ``b``): the share of (seed of a, seed of b)
     pairs where ``a``'s value is better (``better`` +1: higher, -1: lower), ties counting a
     half (the Mann-Whitney statistic rliable and Bouthillier et al. 2021 report), over the
-    recordings given; its interval resamples seeds and recordings as above."""
-    (na, da), (nb, db) = _rows([a, b])
+    recordings given; its percentile interval resamples seeds and recordings as
+    :func:`two_level` does (``groups``, ``seed_keys`` as there)."""
     if better not in (1, -1):
         raise ValueError(f"better must be 1 (higher) or -1 (lower), got {better!r}")
+    parts, groups, keys = _setup([a, b], groups, seed_keys)
+    if groups[0] == groups[1] and parts[0].shape[1] != parts[1].shape[1]:
+        raise ValueError("rows must be aligned on the same recordings (one column each): "
+                         f"{parts[0].shape} and {parts[1].shape}")
 
     def p(va, vb):
         diff = better * (va[..., :, None] - vb[..., None, :])
         return ((diff > 0) + 0.5 * (diff == 0)).mean(axis=(-2, -1))
 
-    value = float(p(row_values(na, da), row_values(nb, db)))
-    R = na.shape[1]
+    full = [q.values(np.ones((1, q.shape[1])))[0] for q in parts]
+    value = float(p(*full))
+    R = min(q.shape[1] for q in parts)
     if R < 2:
         return Interval(value, float("nan"), float("nan"), R)
-    _, vals = _per_seed([(na, da), (nb, db)], n_resamples, np.random.default_rng(seed))
-    reps = p(vals[0], vals[1])
+    counts, seeds = _draws(parts, groups, keys, n_resamples, np.random.default_rng(seed),
+                           "both")
+    (_, da), (_, db) = _per_seed(parts, counts, seeds)
+    reps = p(da, db)
     alpha = (1 - confidence) / 2
     low, high = np.quantile(reps, [alpha, 1 - alpha])
     return Interval(value, float(low), float(high), R)

@@ -10,15 +10,17 @@ functional forms (``*_sums`` in :mod:`~bsp_fast.metrics.pose3d` and
 """
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torchmetrics import Metric
 
 from . import classification as _cls
 from . import pose2d as _p2
 from . import pose3d as _p3
+from . import ranking as _rank
 
-__all__ = ["ClassificationMetrics", "BinaryF1Score", "BinaryPrecision", "BinaryRecall",
-           "BinaryAccuracy", "classification_collection", "PCK", "MPJPE", "NMPJPE", "PAMPJPE", "MPJVE",
+__all__ = ["ClassificationMetrics", "RankingMetrics", "BinaryF1Score", "BinaryPrecision",
+           "BinaryRecall", "BinaryAccuracy", "classification_collection", "PCK", "MPJPE", "NMPJPE", "PAMPJPE", "MPJVE",
            "MaskedMSE", "MissingJointRatio", "PCKPerJoint", "FrameCount"]
 
 
@@ -213,6 +215,58 @@ class ClassificationMetrics(_Confusion):
     def compute(self) -> dict:
         return {k: torch.tensor(v, dtype=torch.float64, device=self.tp.device)
                 for k, v in self._scores().items()}
+
+
+class RankingMetrics(Metric):
+    """Streaming AUROC and AP of the crossing class (:mod:`~bsp_fast.metrics.ranking`,
+    exact): ``update(scores, labels, tte=None, row=None)`` keeps every clip's score (the
+    model's P(crossing)), label, time to event (-1: none) and dataset row as ``cat``
+    states (gathered over DDP processes); ``compute()`` -> ``{"auroc", "ap"}`` float64
+    tensors of everything kept, the same for any batching. ``clips()`` gives the kept
+    clips as NumPy arrays ordered by row (the per-recording file stores them)."""
+
+    is_differentiable = False
+    higher_is_better = True
+    full_state_update = False
+    FIELDS = ("score", "label", "tte", "row")
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        for name in self.FIELDS:
+            self.add_state(name, [], dist_reduce_fx="cat")
+
+    def update(self, scores, labels, tte=None, row=None) -> None:
+        n = len(scores)
+        if n == 0:
+            return
+        values = {"score": (scores, torch.float64), "label": (labels, torch.int64),
+                  "tte": (tte if tte is not None else torch.full((n,), -1), torch.int64),
+                  "row": (row if row is not None else torch.full((n,), -1), torch.int64)}
+        for name, (v, dtype) in values.items():
+            t = torch.as_tensor(v).reshape(-1).to(device=self.device, dtype=dtype)
+            if len(t) != n:
+                raise ValueError(f"RankingMetrics.update: {name} has {len(t)} values for "
+                                 f"{n} scores")
+            getattr(self, name).append(t)
+
+    def clips(self) -> dict:
+        """``{"score", "label", "tte", "row"}`` NumPy arrays of the clips kept by this
+        process (all processes' after ``compute()``'s sync), ordered by row (stable)."""
+        from torchmetrics.utilities import dim_zero_cat
+
+        out = {}
+        for name in self.FIELDS:
+            state = getattr(self, name)
+            out[name] = (dim_zero_cat(state).cpu().numpy() if len(state) else
+                         np.zeros(0, np.float64 if name == "score" else np.int64))
+        order = np.argsort(out["row"], kind="stable")
+        return {k: v[order] for k, v in out.items()}
+
+    def compute(self) -> dict:
+        c = self.clips()
+        return {"auroc": torch.tensor(_rank.auroc(c["score"], c["label"]), dtype=torch.float64),
+                "ap": torch.tensor(_rank.average_precision(c["score"], c["label"]),
+                                   dtype=torch.float64)}
 
 
 class _OneScore(_Confusion):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import ranking
 from ._arrays import Kind, expect, shape_of
 from .pose2d import NORMS, pck_counts
 
@@ -33,18 +34,6 @@ def positive_scores(pred):
     return x[:, 1] - x[:, 0] if len(s) == 2 else x
 
 
-def _binary(pred, target):
-    import torch
-
-    scores = torch.as_tensor(np.asarray(positive_scores(_np(pred))))
-    t = torch.as_tensor(_np(target))
-    expect(tuple(t.shape) == tuple(scores.shape), "target", f"({scores.shape[0]},) labels",
-           f"shape {tuple(t.shape)}")
-    expect(bool(((t == 0) | (t == 1)).all()), "target", "(N,) labels in {0, 1}",
-           "labels outside {0, 1}")
-    return scores, t.long()
-
-
 def _np(x):
     return x.detach().cpu().numpy() if hasattr(x, "detach") else np.asarray(x)
 
@@ -52,35 +41,17 @@ def _np(x):
 def auroc(pred, target) -> float:
     """Area under the ROC curve of the crossing class (ties count one half): the chance
     that a random crossing sample scores above a random non-crossing one. NaN when the
-    target has a single class. ``pred``: scores or logits (:func:`positive_scores`)."""
-    scores, t = _binary(pred, target)
-    if int(t.sum()) in (0, len(t)):
-        return float("nan")
-    # Mann-Whitney U from average ranks, in float64 (torchmetrics' ROC is float32)
-    s, y = scores.double().numpy(), t.numpy().astype(bool)
-    _, inverse, counts = np.unique(s, return_inverse=True, return_counts=True)
-    ranks = (np.cumsum(counts) - (counts - 1) / 2.0)[inverse]  # 1-based, ties averaged
-    n1 = int(y.sum())
-    n0 = len(y) - n1
-    return float((ranks[y].sum() - n1 * (n1 + 1) / 2.0) / (n1 * n0))
+    target has a single class. ``pred``: scores or logits (:func:`positive_scores`);
+    computed exactly by :func:`bsp_fast.metrics.ranking.auroc`."""
+    return ranking.auroc(np.asarray(positive_scores(_np(pred))), _np(target))
 
 
 def average_precision(pred, target) -> float:
     """Average precision of the crossing class: ``Σ_n (R_n − R_{n−1}) P_n`` over the
     distinct score thresholds, highest first (the step-wise area under the
-    precision-recall curve, without interpolation). NaN when no sample is positive."""
-    scores, t = _binary(pred, target)
-    if int(t.sum()) == 0:
-        return float("nan")
-    # in float64 throughout (torchmetrics' precision-recall curve is float32)
-    s, y = scores.double().numpy(), t.numpy().astype(np.float64)
-    order = np.argsort(-s, kind="stable")
-    s, y = s[order], y[order]
-    last = np.r_[np.flatnonzero(np.diff(s)), len(s) - 1]  # last sample of each threshold
-    tp = np.cumsum(y)[last]
-    chosen = last + 1.0
-    recall = tp / tp[-1]
-    return float(np.sum(np.diff(np.r_[0.0, recall]) * (tp / chosen)))
+    precision-recall curve, without interpolation). NaN when no sample is positive.
+    Computed exactly by :func:`bsp_fast.metrics.ranking.average_precision`."""
+    return ranking.average_precision(np.asarray(positive_scores(_np(pred))), _np(target))
 
 
 def pck_curve(pred, gt, *, alphas=PCK_AUC_ALPHAS, norm: str = "bbox", visible=None):

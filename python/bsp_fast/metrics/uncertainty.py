@@ -8,11 +8,15 @@ are the recordings: ``num`` and ``den`` are kept per recording
 (:mod:`bsp_fast.training.per_recording`) and the bootstrap (``scipy.stats.bootstrap``,
 percentile intervals) resamples recordings with all their clips. Two or more rows scored
 on the same recordings are resampled *jointly* (``paired=True``): the interval of a
-difference then reflects only how the rows differ recording by recording.
+difference then reflects only how the rows differ recording by recording. These intervals
+hold the training seeds fixed; the tables use :mod:`.hierarchical` (seeds and recordings).
 
-A finding is **reproduced** when the interval of its statistic lies strictly on the
-report's side of zero, **not reproduced** when it lies strictly on the other side, and
-**inconclusive** otherwise (identical rows give an interval [0, 0]: inconclusive).
+A finding's mark (:func:`decide`): **reproduced** when its statistic is decided on the
+report's side of zero, **not reproduced** when on the other side, **inconclusive**
+otherwise; decided means a Holm-adjusted p-value (:func:`holm`, over the table's family)
+below ``1 - CONFIDENCE``, and never with fewer than :data:`MIN_SEEDS` seeds in a row or
+:data:`MIN_RECORDINGS` test recordings (:func:`rule`). :func:`mark` reads an interval
+alone (identical rows give an interval [0, 0]: inconclusive).
 """
 from __future__ import annotations
 
@@ -24,11 +28,17 @@ from ..defaults import SEED
 
 __all__ = ["Interval", "CONFIDENCE", "N_RESAMPLES", "YES", "NO", "UNSURE", "pool",
            "align", "ratio", "ratio_interval", "paired_interval", "grouped_interval", "mark",
-           "combine_marks"]
+           "combine_marks", "holm", "decide", "rule", "equivalence", "MIN_SEEDS",
+           "MIN_RECORDINGS", "AGREES", "DIFFERS", "UNDETERMINED"]
 
 CONFIDENCE = 0.95
 N_RESAMPLES = 2000
 YES, NO, UNSURE = "reproduced", "not reproduced", "inconclusive"
+#: below these a finding is inconclusive by rule, whatever its interval: with fewer seeds
+#: the seed variance is barely estimated (a t quantile with 2 degrees of freedom is 4.3),
+#: with fewer recordings the recording-level bootstrap under-covers (docs/reproduce.md)
+MIN_SEEDS, MIN_RECORDINGS = 5, 10
+AGREES, DIFFERS, UNDETERMINED = "agrees", "differs", "undetermined"
 
 
 @dataclass(frozen=True)
@@ -183,3 +193,64 @@ def combine_marks(marks: list) -> str:
     if marks and all(m == YES for m in marks):
         return YES
     return UNSURE
+
+
+def holm(pvalues) -> list:
+    """Holm-Bonferroni adjusted p-values, in the input's order: the k-th smallest of m is
+    multiplied by (m - k + 1), made non-decreasing in that order and capped at 1 (a
+    hypothesis is rejected at level a when its adjusted p < a; the family-wise error rate
+    stays at a). NaN p-values (nothing tested) stay NaN and do not count in m."""
+    p = np.asarray(pvalues, dtype=np.float64)
+    out = np.full(p.shape, np.nan)
+    idx = np.flatnonzero(np.isfinite(p))
+    if idx.size:
+        if ((p[idx] < 0) | (p[idx] > 1)).any():
+            raise ValueError(f"p-values must lie in [0, 1], got {p[idx].tolist()}")
+        order = idx[np.argsort(p[idx], kind="stable")]
+        m = idx.size
+        adjusted = np.maximum.accumulate((m - np.arange(m)) * p[order])
+        out[order] = np.minimum(adjusted, 1.0)
+    return out.tolist()
+
+
+def decide(value: float, p_adjusted: float, side: int = 1,
+           level: float = round(1 - CONFIDENCE, 12)) -> str:
+    """The mark of one comparison: decided when ``p_adjusted < level``, then reproduced
+    when ``value`` lies on ``side`` of zero (+1 above, -1 below) and not reproduced when on
+    the other side; else (or undefined) inconclusive."""
+    if side not in (1, -1):
+        raise ValueError(f"side must be one of [1, -1], got {side!r}")
+    if not (np.isfinite(p_adjusted) and np.isfinite(value)) or p_adjusted >= level \
+            or value == 0:
+        return UNSURE
+    return YES if side * value > 0 else NO
+
+
+def rule(seeds: dict, recordings: int) -> str | None:
+    """Why a finding is inconclusive whatever its interval, or None: ``seeds`` maps each
+    row it needs to its number of seeds, ``recordings`` is its smallest test set's count."""
+    few = {r: s for r, s in seeds.items() if s < MIN_SEEDS}
+    why = []
+    if few:
+        why.append(f"fewer than {MIN_SEEDS} seeds (" + ", ".join(f"{r}: {s}" for r, s in
+                                                                few.items()) + ")")
+    if recordings < MIN_RECORDINGS:
+        why.append(f"fewer than {MIN_RECORDINGS} test recordings ({recordings})")
+    return "; ".join(why) or None
+
+
+def equivalence(interval: Interval, target: float, margin: float) -> str:
+    """Whether an effect's size agrees with ``target`` within ``margin`` (a TOST-style
+    equivalence test): ``agrees`` when the whole interval lies inside ``[target - margin,
+    target + margin]``, ``differs`` when it lies wholly outside, ``undetermined``
+    otherwise (an overlap alone shows nothing: a wide interval overlaps every size)."""
+    if not (isinstance(margin, (int, float)) and np.isfinite(margin) and margin >= 0):
+        raise ValueError(f"margin must be a number >= 0, got {margin!r}")
+    lo, hi = interval.low, interval.high
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return UNDETERMINED
+    if target - margin <= lo and hi <= target + margin:
+        return AGREES
+    if hi < target - margin or lo > target + margin:
+        return DIFFERS
+    return UNDETERMINED

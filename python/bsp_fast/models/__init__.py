@@ -14,7 +14,8 @@ from __future__ import annotations
 from .base import (AutoencoderModel, BaseModel, ClassificationModel, LiftingModel,
                    PoseEstimationModel)
 from .registry import TASKS, available, create, hparams_of, model_class, register
-from . import graph, lstm, martinez, pose_cnn, poseformer, transformer  # noqa: F401  (register)
+from . import (graph, lstm, martinez, pose_cnn, pose_temporal,  # noqa: F401  (register)
+               poseformer, transformer)
 from .kinematics import ForwardKinematics, rotation_6d_to_matrix
 from .trivial import trivial_baseline
 

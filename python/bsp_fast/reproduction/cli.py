@@ -7,7 +7,10 @@ numbers (:mod:`.report`). See docs/reproduce.md.
 A table file holds ``common`` options, ``budgets`` (smoke / quick / full option sets),
 ``rows`` (a name, a label, the row's own options, optionally the report's values) and
 ``findings``. Each run's resolved options are written as a plain ``bsp-train --config``
-file (``OUT/TABLE-BUDGET/configs/ROW.yaml``) and the run is trained from that file.
+file (``OUT/TABLE-BUDGET/configs/ROW.yaml``) and the run is trained from that file. Runs
+made under another version of the table file are not mixed in (:mod:`.protocol`) unless
+``--allow-changed``; ``--publish DIR`` copies the finished table into ``DIR`` for the
+README (:mod:`.readme`).
 """
 from __future__ import annotations
 
@@ -34,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="tables: " + ", ".join(table_names()) + ". Budgets: smoke (1 epoch, 2 batches: plumbing "
                "only), quick (2-core CPU on bsp-synth data; costs in each table file), full (the "
                "report's epochs, GPU). Exit codes: 0 done, 1 a run failed or bad data, 2 bad "
-               "arguments. docs: docs/reproduce.md")
+               "arguments or runs of another protocol in --out. docs: docs/reproduce.md")
     p.add_argument("table", metavar="TABLE", nargs="?",
                    help="table name (installed with bsp_fast) or path to a table YAML")
     p.add_argument("--table", dest="table_file", metavar="FILE.yaml",
@@ -57,6 +60,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dry-run", action="store_true",
                    help="write the per-row bsp-train configs and print the commands only")
     p.add_argument("--verbose", action="store_true", help="bsp-train's progress bars and tables")
+    p.add_argument("--allow-changed", action="store_true",
+                   help="reuse or continue runs made under another version of the table file "
+                        "(its protocol hash) or other --set options (both recorded in "
+                        "OUT/TABLE-BUDGET/protocol.json); the "
+                        "mix is recorded in results.json and printed under the table "
+                        "(default: refuse, exit 2, nothing written)")
+    p.add_argument("--publish", metavar="DIR",
+                   help="after the report, copy the finished table into DIR (e.g. docs/results): "
+                        "TABLE-BUDGET.json, .per_recording.json and .md, which "
+                        "python -m bsp_fast.reproduction.readme renders into the README")
     p.add_argument("--breakdown", action="store_true",
                    help="also the test breakdown of every row (bsp-eval --breakdown: per joint, "
                         "size or distance bin, profile, missing joints), mean ± std over seeds: "
@@ -75,6 +88,8 @@ def main(argv=None) -> int:
     ns = parser.parse_args(argv)
     if (ns.table is None) == (ns.table_file is None):
         parser.error("give a TABLE name or --table FILE.yaml (one of them)")
+    if ns.publish and ns.dry_run:
+        parser.error("--publish copies a finished table: not with --dry-run")
     if ns.table_file is not None and Path(ns.table_file).suffix not in (".yaml", ".yml"):
         parser.error(f"--table {ns.table_file}: a table file ends in .yaml or .yml")
     from ..training.lifecycle import Interrupted, signals
@@ -91,9 +106,13 @@ def main(argv=None) -> int:
             res = run_table(tab, ns.data, ns.budget, ns.out, seeds=seeds,
                             split_seeds=ns.split_seeds, jobs=ns.jobs, rows=rows,
                             overrides=overrides, force=ns.force, quiet=not ns.verbose,
-                            dry_run=ns.dry_run)
+                            dry_run=ns.dry_run, allow_changed=ns.allow_changed)
             if not ns.dry_run:
                 write_report(tab, res, breakdown=ns.breakdown, force=ns.force)
+                if ns.publish:
+                    from .readme import publish
+
+                    print(f"published {publish(tab, res['dir'], ns.publish)}")
     except Interrupted as exc:
         print(f"bsp-reproduce: interrupted ({exc}); finished rows are kept and reused, an "
               "interrupted row continues where it stopped when the same command is run "

@@ -31,16 +31,22 @@ def run_cost(run_dir) -> dict:
     module = load_module(run_dir / "checkpoints" / "best.ckpt")
     net = module.net
     options = get_task(cfg["task"]).dataset_options(cfg)
+    # train-split settings the data module applies (box jitter, augmentation) are not test
+    # clips' and box_jitter is no ClipDataset keyword: counted on plain test clips
+    for key in ("box_jitter", "augment"):
+        options.pop(key, None)
     ds = ClipDataset(h5, "test", cfg["task"], **options)
     batch = ds[:min(4, len(ds))]
     return {"parameters": parameter_count(net), "flops_per_clip": flops_per_clip(net, batch)}
 
 
-def cost_cells(run_dirs: list, seconds: list) -> list:
-    """The three cost cells of a row: from its first run's model, and the mean training
-    time over its runs (``seconds``: their ``metrics.json`` seconds)."""
+def cost_cells(run_dirs: list, seconds: list, cost: dict | None = None) -> list:
+    """The three cost cells of a row: from its first run's model (``cost``: its
+    :func:`run_cost`, already measured), and the mean training time over its runs
+    (``seconds``: their ``metrics.json`` seconds)."""
     run_dirs = [d for d in run_dirs if d]
-    cost = run_cost(run_dirs[0]) if run_dirs else {}
+    if cost is None:
+        cost = run_cost(run_dirs[0]) if run_dirs else {}
     params = f"{cost['parameters']:,}" if cost else "–"
     flops = f"{cost['flops_per_clip'] / 1e6:,.1f}" if cost else "–"
     fits = [s["fit"] for s in seconds if s and s.get("fit") is not None]

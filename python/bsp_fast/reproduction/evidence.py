@@ -1,28 +1,62 @@
-"""A table trained with several seeds, as evidence: each cell the mean ± std over seeds and
-a 95 % interval from a bootstrap over test recordings (the seeds' per-recording sums
-pooled), each of the report's findings marked by a paired bootstrap over the same
-recordings: reproduced, not reproduced or inconclusive (:mod:`bsp_fast.metrics.uncertainty`),
-with the difference and its interval beside the mark. See docs/reproduce.md.
+"""A table trained with several seeds, as evidence (docs/reproduce.md, "Seeds, intervals and
+marks"): each cell the mean ± std over seeds and a 95 % interval over seeds *and* test
+recordings, each of the report's findings marked from the same two-level bootstrap
+(:mod:`bsp_fast.metrics.hierarchical`, t method), Holm-Bonferroni over the table's family
+of comparisons, with the probability of improvement beside each comparison of two rows.
+
+The data: per row, per seed, per test recording the sums behind each metric (``num``,
+``den``: ``test_per_recording.json``), or for a per-clip metric (:data:`CLIP_METRICS`) each
+recording's clips. Rows scored on one dataset are aligned on the union of their
+recordings (a seed that did not test a recording adds nothing there), so the recordings
+are drawn once per replicate for all of them (paired); rows of different datasets
+(``data_suffix``) share no recordings and are drawn independently. A row's seeds are drawn
+within the row; a row and its trivial baseline (or a row read from another row's trivial
+baseline, ``initial_of``) are the same runs and share the draw.
 """
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np
 
+from ..metrics import hierarchical as H
 from ..metrics import uncertainty as U
 from .findings import better as _sign, format_value
+from .protocol import confirmatory
 
-__all__ = ["summarise", "evaluate_findings", "DROP_TOLERANCE"]
+__all__ = ["summarise", "evaluate_findings", "statistics", "DEFAULT_MARGIN", "METHOD",
+           "CLIP_METRICS"]
 
-#: tolerance on an effect size the report gives when its finding states none: half of it
-DROP_TOLERANCE = 0.5
+#: the interval and test of cells and findings: the method whose coverage was measured
+#: within 93-97 % at the tables' sizes (docs/reproduce.md)
+METHOD = "t"
+#: a finding's ``equivalence_margin`` when it states none: this share of the report's size
+DEFAULT_MARGIN = 0.5
+#: per-clip metrics (not ratios of per-recording sums) and their functions in
+#: ``bsp_fast.metrics.ranking``, ``fn(scores, labels)``; their clips are read from a
+#: per-recording section's ``clips`` (one list per recording of ``[score, label, ...]``)
+CLIP_METRICS = {"auroc": "auroc", "ap": "average_precision"}
+
+
+def statistics(res: dict | None = None) -> dict:
+    """What the cells' intervals and the marks are (saved in ``results.json``)."""
+    return {"interval": f"two-level bootstrap, {METHOD} method: seeds resampled within each "
+                        "row, test recordings jointly for the rows of one dataset",
+            "confidence": U.CONFIDENCE, "resamples": U.N_RESAMPLES,
+            "interval_seeds": "the same over seeds only, the test recordings fixed",
+            "family": "Holm-Bonferroni over every comparison of this table file's "
+                      "confirmatory findings at this budget"
+                      + (f" ({res['budget']})" if res else "")
+                      + "; an ordering of k rows counts k - 1 comparisons, beats_initial "
+                        "one per row; findings marked n/a do not count; the exploratory "
+                        "findings are a family of their own",
+            "min_seeds": U.MIN_SEEDS, "min_recordings": U.MIN_RECORDINGS,
+            "equivalence_margin_default": f"{DEFAULT_MARGIN:g} x the report's size"}
 
 
 class _Sums:
-    """The per-recording sums of a result's rows, loaded once."""
+    """The per-seed, per-recording data of a result's rows, each file read once."""
 
     def __init__(self, res: dict):
         self.res, self.docs = res, {}
@@ -32,87 +66,106 @@ class _Sums:
             self.docs[path] = json.loads(Path(path).read_text(encoding="utf-8"))
         return self.docs[path]
 
-    def _parts(self, row: str, metric: str, initial: bool):
-        """``(sections, empty)``: the ``test`` (or ``initial``) section of each seed's
-        per-recording file and the metric's value for no data; None when a seed has no
-        file or its section lacks ``metric``."""
+    def runs_of(self, row: str) -> str:
+        """The row whose runs ``row``'s values come from (itself, or its ``initial_of``)."""
+        return self.res["results"][row].get("run_of") or row
+
+    def seeds(self, row: str, metric: str, initial: bool):
+        """``([(recordings, data), ...] one per seed, empty)``: ``data`` ``(num, den)``
+        arrays, or for a :data:`CLIP_METRICS` metric one ``(scores, labels)`` per
+        recording; ``empty``: the metric's value for no data. None when a seed has no
+        per-recording file or its ``test`` (``initial``: trivial baseline's) section lacks
+        ``metric``."""
         r = self.res["results"][row]
         section = "initial" if (initial or r.get("source") == "initial") else "test"
-        parts, empty = [], None
+        out, empty = [], None
         for i, s in enumerate(r["seeds"].values()):
             if not s.get("per_recording"):
                 return None
             d = self._doc(s["per_recording"])
             part = d.get(section)
-            if not part or metric not in part["metrics"]:
+            if not part:
                 return None
-            parts.append(part)
+            if metric in CLIP_METRICS and part.get("clips") is not None:
+                out.append((list(part["recordings"]), _clips(part, s["per_recording"])))
+            elif metric in part.get("metrics", {}):
+                recs, num, den = U.pool([part], metric)
+                out.append((recs, (num, den)))
+            else:
+                return None
             if i == 0:  # the first seed's file says it
                 empty = d.get("empty", {}).get(metric)
-        return parts, float("nan") if empty is None else empty
-
-    def pooled(self, row: str, metric: str, initial: bool = False):
-        """``(recordings, num, den, empty)`` of ``row`` over its seeds (``initial``: its
-        trivial baseline's), or None when a run has no per-recording file."""
-        found = self._parts(row, metric, initial)
-        if found is None:
-            return None
-        parts, empty = found
-        return (*U.pool(parts, metric), empty)
-
-    def per_seed(self, row: str, metric: str, initial: bool = False):
-        """``[(recordings, num, den, empty), ...]``, one per seed of ``row``, when every seed
-        was tested on the same recordings (the split fixed); else None (the caller pools)."""
-        found = self._parts(row, metric, initial)
-        if found is None:
-            return None
-        parts, empty = found
-        out = [(*U.pool([part], metric), empty) for part in parts]
-        return out if len({tuple(o[0]) for o in out}) == 1 else None
+        return out, float("nan") if empty is None else empty
 
 
-def _seed_mean(counts: list, fn):
-    """``fn`` of the per-row means over seeds: ``values`` holds each row's seeds in turn
-    (``counts`` of them per row)."""
-    def stat(values):
-        means, i = [], 0
-        for c in counts:
-            means.append(np.mean(np.stack([np.asarray(v) for v in values[i:i + c]]), axis=0))
-            i += c
-        return fn(means)
-    return stat
+def _clips(part: dict, path) -> list:
+    """``[(scores, labels)]`` per recording of a section's ``clips``."""
+    clips = part["clips"]
+    if len(clips) != len(part["recordings"]):
+        raise ValueError(f"{path}: {len(clips)} clip lists for {len(part['recordings'])} "
+                         "recordings")
+    out = []
+    for rec, cl in zip(part["recordings"], clips):
+        if not cl:
+            out.append((np.zeros(0), np.zeros(0)))
+            continue
+        a = np.asarray(cl, dtype=np.float64)
+        if a.ndim != 2 or a.shape[1] < 2:
+            raise ValueError(f"{path}: recording {rec!r}: each clip must be [score, label, "
+                             f"...], got {cl[0]!r}")
+        out.append((a[:, 0], a[:, 1]))
+    return out
 
 
-def _grouped(items: list, keys, stat):
-    """The interval of ``stat(values in items' order)`` where ``items`` are ``(recordings,
-    num, den, empty)``: aligned on the recordings common to each key's group (one test
-    set), resampled jointly within a group and independently between groups (rows of
-    different datasets share no recordings); one key (the default) is the paired case."""
-    keys = list(keys) if keys is not None else [0] * len(items)
-    groups, perm = [], []
-    for key in dict.fromkeys(keys):
-        idx = [i for i, k in enumerate(keys) if k == key]
-        groups.append(U.align([items[i][:3] for i in idx])[1])
-        perm += idx
-    back = np.argsort(perm)  # group order -> items' order
+def _clip_fn(metric: str):
+    from importlib import import_module
 
-    def in_order(values):
-        return stat([values[j] for j in back])
-    return U.grouped_interval(groups, in_order, empty=[items[i][3] for i in perm])
+    return getattr(import_module("bsp_fast.metrics.ranking"), CLIP_METRICS[metric])
 
 
-def _seed_interval(sums: "_Sums", parts: list, fn, data_keys=None):
-    """The bootstrap interval of ``fn`` of the rows' **means over seeds** (the tables'
-    cells), resampling the test recordings jointly for every row and seed of one dataset
-    (``data_keys``: one key per part; parts of different keys are resampled
-    independently); None when a row has no per-recording sums or its seeds saw different
-    recordings (``--split-seeds``)."""
-    per = [sums.per_seed(row, metric, initial) for row, metric, initial in parts]
-    if any(p is None for p in per):
+def _row(seeds: list, recs: list, empty: float, metric: str):
+    """One row's :class:`~H.Ratios` (or :class:`~H.Clips`) over ``recs`` (zero sums, no
+    clips, where a seed did not test a recording)."""
+    pos = {r: i for i, r in enumerate(recs)}
+    if isinstance(seeds[0][1], list):
+        none = (np.zeros(0), np.zeros(0))
+        clips = [[none] * len(recs) for _ in seeds]
+        for s, (rs, cl) in enumerate(seeds):
+            for r, c in zip(rs, cl):
+                clips[s][pos[r]] = c
+        return H.Clips(clips, _clip_fn(metric), empty)
+    num, den = np.zeros((len(seeds), len(recs))), np.zeros((len(seeds), len(recs)))
+    for s, (rs, (n, d)) in enumerate(seeds):
+        idx = [pos[r] for r in rs]
+        num[s, idx], den[s, idx] = n, d
+    return H.Ratios(num, den, empty)
+
+
+def _data_key(tab: dict | None, row: str) -> str:
+    """Which test set a row is scored on: rows with a ``data_suffix`` read another
+    dataset (docs/reproduce.md, ablation tables)."""
+    spec = next((r for r in (tab or {}).get("rows", []) if r["name"] == row), {})
+    return spec.get("data_suffix") or ""
+
+
+def _load(sums: _Sums, tab, parts: list):
+    """``{"rows", "groups", "keys", "seeds", "recordings"}`` for :func:`H.two_level` from
+    ``parts``, ``(row, metric, initial)`` each; None when a part has no per-recording data."""
+    loaded = [sums.seeds(row, metric, initial) for row, metric, initial in parts]
+    if any(x is None for x in loaded):
         return None
-    flat = [s for p in per for s in p]
-    keys = None if data_keys is None else [k for k, p in zip(data_keys, per) for _ in p]
-    return _grouped(flat, keys, _seed_mean([len(p) for p in per], fn))
+    groups = [_data_key(tab, row) for row, _, _ in parts]
+    union = {g: sorted({r for x, gx in zip(loaded, groups) if gx == g for recs, _ in x[0]
+                        for r in recs}) for g in dict.fromkeys(groups)}
+    rows = [_row(x[0], union[g], x[1], part[1]) for x, g, part in zip(loaded, groups, parts)]
+    return {"rows": rows, "groups": groups, "keys": [sums.runs_of(r) for r, _, _ in parts],
+            "seeds": {row: len(x[0]) for (row, _, _), x in zip(parts, loaded)},
+            "recordings": min(len(u) for u in union.values())}
+
+
+def _test(data: dict, fn, levels: str = "both") -> H.Test:
+    return H.two_level(data["rows"], fn, groups=data["groups"], seed_keys=data["keys"],
+                       method=METHOD, levels=levels)
 
 
 def _values(r: dict, metric: str) -> list:
@@ -120,133 +173,188 @@ def _values(r: dict, metric: str) -> list:
     return [s[key].get(metric) for s in r["seeds"].values() if s[key].get(metric) is not None]
 
 
+def _bounds(iv) -> list | None:
+    return [iv.low, iv.high] if iv is not None and np.isfinite([iv.low, iv.high]).all() \
+        else None
+
+
 def summarise(tab: dict, res: dict) -> dict:
-    """Adds to each row of ``res["results"]`` (from :func:`seeds.reproduce_seeds`):
+    """Adds to each row of ``res["results"]`` (from :func:`.runner.run_table` with seeds):
     ``metrics`` and ``initial`` (means over seeds), ``std`` (sample std over seeds, None
-    for one seed) and ``interval`` (``[low, high]``: the bootstrap interval of the mean over
-    seeds, the test recordings resampled jointly for every seed; with ``--split-seeds``, of
-    the ratio pooled over seeds) per metric of the table. Returns ``res``."""
+    for one seed), ``interval`` (``[low, high]``: the 95 % two-level interval of the mean
+    over seeds, seeds and test recordings resampled) and ``interval_seeds`` (over seeds
+    only, the recordings fixed) per metric of the table; absent where undefined (one seed,
+    no per-recording data). Adds ``res["statistics"]`` (:func:`statistics`). Returns ``res``."""
     sums = _Sums(res)
     for name, r in res["results"].items():
-        r["metrics"], r["std"], r["interval"], r["initial"] = {}, {}, {}, {}
+        r["metrics"], r["std"], r["initial"] = {}, {}, {}
+        r["interval"], r["interval_seeds"] = {}, {}
         for m in tab["metrics"]:
             vals = _values(r, m)
             r["metrics"][m] = float(np.mean(vals)) if vals else None
             r["std"][m] = float(np.std(vals, ddof=1)) if len(vals) > 1 else None
-            iv = _seed_interval(sums, [(name, m, False)], lambda v: v[0])
-            p = sums.pooled(name, m) if iv is None else None
-            if p is not None:  # seeds on different splits: the pooled ratio's interval
-                iv = U.ratio_interval(p[1], p[2], empty=p[3])
-            if iv is not None:
-                r["interval"][m] = [iv.low, iv.high]
+            data = _load(sums, tab, [(name, m, False)])
+            for key, levels in (("interval", "both"), ("interval_seeds", "seeds")):
+                b = _bounds(_test(data, lambda v: v[0], levels) if data else None)
+                if b is not None:
+                    r[key][m] = b
             init = [s["initial"].get(m) for s in r["seeds"].values()
                     if s["initial"].get(m) is not None]
             r["initial"][m] = float(np.mean(init)) if init else None
         r["baseline"] = next(iter(r["seeds"].values())).get("baseline")
+    res["statistics"] = statistics(res)
     return res
 
 
 # ---------------------------------------------------------------------- findings
-def _data_key(tab: dict, row: str) -> str:
-    """Which test set a row is scored on: rows with a ``data_suffix`` read another
-    dataset (docs/reproduce.md, ablation tables)."""
-    spec = next((r for r in tab["rows"] if r["name"] == row), {})
-    return spec.get("data_suffix") or ""
-
-
-def _interval(sums: _Sums, parts: list, fn, tab: dict | None = None):
-    """``parts``: ``(row, metric, initial)`` each; ``fn(values) -> statistic`` of the
-    rows' means over seeds (pooled over seeds when the seeds' splits differ). Rows of
-    different datasets (``tab``'s ``data_suffix``) are resampled independently."""
-    keys = None if tab is None else [_data_key(tab, row) for row, _, _ in parts]
-    iv = _seed_interval(sums, parts, fn, keys)
-    if iv is not None:
-        return iv
-    pooled = [sums.pooled(row, metric, initial) for row, metric, initial in parts]
-    if any(p is None for p in pooled):
-        return None
-    return _grouped(pooled, keys, fn)
-
-
-def _text(tab, metric, label: str, iv) -> str:
-    pp = " p.p." if tab["metrics"][metric].get("format") == "pct" else ""
-    low, high = (format_value(tab, metric, v, True) for v in (iv.low, iv.high))
-    return f"{label} {format_value(tab, metric, iv.value, True)}{pp} [{low}, {high}]"
-
-
 def _relation(rel: str, margin: float):
     """(offset, side) of ``a - b`` for a ``compare`` relation: the statistic is
     ``a - b + offset`` and it must lie on ``side`` of zero."""
     return {">": (-margin, 1), ">=": (margin, 1), "<": (margin, -1), "<=": (-margin, -1)}[rel]
 
 
-def _finding(tab, f, sums: _Sums, have) -> tuple:
-    """(ours text, status) of one finding."""
+def _pieces(tab, f) -> list:
+    """``[(label, parts, fn, side, pair)]``: the comparisons of one finding; ``pair``: the
+    two parts whose P(first beats second) is reported, or None."""
     m, sign, k = f["metric"], _sign(tab, f["metric"]), f["kind"]
-    pieces = []  # (label, parts, fn, side)
+    out = []
     if k == "order":
         for a, b in zip(f["rows"], f["rows"][1:]):
-            pieces.append((f"{a} − {b}", [(a, m, False), (b, m, False)],
-                           lambda v: v[0] - v[1], sign))
+            out.append((f"{a} − {b}", [(a, m, False), (b, m, False)],
+                        lambda v: v[0] - v[1], sign, (0, 1)))
     elif k == "compare":
         off, side = _relation(f.get("relation", ">="), f.get("margin", 0.0))
-        pieces.append((f"{f['a']} − {f['b']}" + (f" {off:+g}" if off else ""),
-                       [(f["a"], m, False), (f["b"], m, False)],
-                       lambda v: v[0] - v[1] + off, side))
+        out.append((f"{f['a']} − {f['b']}" + (f" {off:+g}" if off else ""),
+                    [(f["a"], m, False), (f["b"], m, False)],
+                    lambda v: v[0] - v[1] + off, side, (0, 1)))
     elif k == "drop":
-        pieces.append(("loss", [(f["base"], m, False), (f["other"], m, False)],
-                       lambda v: sign * (v[0] - v[1]), 1))
+        out.append(("loss", [(f["base"], m, False), (f["other"], m, False)],
+                    lambda v: sign * (v[0] - v[1]), 1, (0, 1)))
     elif k == "robuster":
         (a0, a1), (b0, b1) = f["a"], f["b"]
-        pieces.append(("extra loss of b", [(a0, m, False), (a1, m, False), (b0, m, False),
-                                           (b1, m, False)],
-                       lambda v: sign * (v[2] - v[3]) - sign * (v[0] - v[1]), 1))
+        out.append(("extra loss of b", [(a0, m, False), (a1, m, False), (b0, m, False),
+                                        (b1, m, False)],
+                    lambda v: sign * (v[2] - v[3]) - sign * (v[0] - v[1]), 1, None))
     elif k == "at_least":
-        pieces.append((f"{f['row']} − {format_value(tab, m, f['value'])}",
-                       [(f["row"], m, False)], lambda v: v[0] - f["value"], 1))
+        out.append((f"{f['row']} − {format_value(tab, m, f['value'])}",
+                    [(f["row"], m, False)], lambda v: v[0] - f["value"], 1, None))
     elif k == "fails":
         base = "f1_constant" if f.get("baseline") == "constant" else m
         margin = f.get("margin", 0.0)
-        pieces.append((f"{f['row']} − (trivial {margin:+g})",
-                       [(f["row"], m, False), (f["row"], base, True)],
-                       lambda v: sign * (v[0] - v[1]) - margin, -1))
+        out.append((f"{f['row']} − (trivial {margin:+g})",
+                    [(f["row"], m, False), (f["row"], base, True)],
+                    lambda v: sign * (v[0] - v[1]) - margin, -1, (0, 1)))
     else:  # beats_initial
         for r in f["rows"]:
-            pieces.append((f"{r} − trivial", [(r, m, False), (r, m, True)],
-                           lambda v: v[0] - v[1], sign))
-    if any(row not in have for _, parts, _, _ in pieces for row, _, _ in parts):
-        return "rows not run", "n/a", None
-    texts, marks, first = [], [], None
-    for label, parts, fn, side in pieces:
-        iv = _interval(sums, parts, fn, tab)
-        if iv is None:
-            return "no per-recording sums", "n/a", None
-        first = first or iv
-        marks.append(U.mark(iv, side))
-        texts.append(_text(tab, m, label, iv) + f" ({marks[-1]})" * (len(pieces) > 1))
-    ours = "; ".join(texts)
-    if k == "drop" and f.get("report") is not None:
-        tol = f.get("tolerance", DROP_TOLERANCE * abs(f["report"]))
-        lo, hi = f["report"] - tol, f["report"] + tol
-        agrees = first.high >= lo and first.low <= hi
-        ours += (f"; size {'agrees with' if agrees else 'differs from'} the report's "
-                 f"{format_value(tab, m, f['report'])} ± {format_value(tab, m, tol)}")
-    return ours, U.combine_marks(marks), first
+            out.append((f"{r} − trivial", [(r, m, False), (r, m, True)],
+                        lambda v: v[0] - v[1], sign, (0, 1)))
+    return out
+
+
+def _margin(tab: dict, f: dict) -> float:
+    """The equivalence margin of a ``drop`` finding's size, checked."""
+    where = f"{tab.get('path', tab.get('table'))}: finding {f['text']!r}"
+    if "tolerance" in f:
+        raise ValueError(f"{where}: 'tolerance' is now 'equivalence_margin' (the interval "
+                         "must lie inside report ± margin, not merely overlap it)")
+    margin = f.get("equivalence_margin", DEFAULT_MARGIN * abs(f["report"]))
+    if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not margin >= 0:
+        raise ValueError(f"{where}: equivalence_margin must be a number >= 0, got {margin!r}")
+    return float(margin)
+
+
+def _compute(tab, f, sums: _Sums, have) -> dict:
+    """One finding's comparisons: each its two-level test, seeds-only interval and P(first
+    row beats second); or ``{"na": reason}``."""
+    pieces = _pieces(tab, f)
+    if any(row not in have for _, parts, _, _, _ in pieces for row, _, _ in parts):
+        return {"na": "rows not run"}
+    out, seeds, recordings = [], {}, []
+    for label, parts, fn, side, pair in pieces:
+        data = _load(sums, tab, parts)
+        if data is None:
+            return {"na": "no per-recording sums"}
+        seeds.update(data["seeds"])
+        recordings.append(data["recordings"])
+        poi, sign = None, _sign(tab, f["metric"])
+        if pair is not None and sign:
+            i, j = pair
+            poi = H.probability_of_improvement(
+                data["rows"][i], data["rows"][j], sign,
+                groups=[data["groups"][i], data["groups"][j]],
+                seed_keys=[data["keys"][i], data["keys"][j]])
+        out.append({"label": label, "side": side, "test": _test(data, fn),
+                    "seeds_only": _test(data, fn, "seeds"), "poi": poi})
+    return {"pieces": out, "rule": U.rule(seeds, min(recordings)), "seeds": seeds}
+
+
+def _num(tab, m, v) -> str:
+    return format_value(tab, m, v, True)
+
+
+def _finding(tab, f, c: dict) -> dict:
+    """The printed text and the fields of one computed finding (``c["pieces"]`` carry
+    their Holm-adjusted p as ``p_holm``)."""
+    m = f["metric"]
+    pp = " p.p." if tab["metrics"][m].get("format") == "pct" else ""
+    pieces, texts, marks = c["pieces"], [], []
+    for q in pieces:
+        t, s = q["test"], q["seeds_only"]
+        marks.append(U.decide(t.value, q["p_holm"], q["side"]))
+        text = (f"{q['label']} {_num(tab, m, t.value)}{pp} [{_num(tab, m, t.low)}, "
+                f"{_num(tab, m, t.high)}] (seeds only [{_num(tab, m, s.low)}, "
+                f"{_num(tab, m, s.high)}])")
+        texts.append(text + (f" ({marks[-1]})" if len(pieces) > 1 else ""))
+    status = U.UNSURE if c["rule"] else U.combine_marks(marks)
+    first = pieces[0]["test"]
+    out = {"status": status, "rule": c["rule"], "seeds": c["seeds"],
+           "difference": first.value, "interval": [first.low, first.high],
+           "interval_seeds": [pieces[0]["seeds_only"].low, pieces[0]["seeds_only"].high],
+           "recordings": first.n, "p": [q["test"].p for q in pieces],
+           "p_holm": [q["p_holm"] for q in pieces],
+           "p_improvement": [None if q["poi"] is None else
+                             {"value": q["poi"].value, "interval": [q["poi"].low, q["poi"].high]}
+                             for q in pieces]}
+    if f["kind"] == "drop" and f.get("report") is not None:
+        margin = _margin(tab, f)
+        verdict = None if c["rule"] else U.equivalence(first, f["report"], margin)
+        size = f"{format_value(tab, m, f['report'])}{pp} ± {format_value(tab, m, margin)}"
+        texts.append({U.AGREES: f"size agrees with the report's {size} (interval inside)",
+                      U.DIFFERS: f"size differs from the report's {size} (interval outside)",
+                      U.UNDETERMINED: f"size undetermined against the report's {size} "
+                                      "(interval not inside)",
+                      None: f"size not judged against the report's {size} (by rule)"}[verdict])
+        out["size"] = {"report": f["report"], "equivalence_margin": margin, "verdict": verdict}
+    out["ours"] = "; ".join(texts)
+    return out
 
 
 def evaluate_findings(tab: dict, res: dict) -> list:
-    """``[{"text", "ours", "report", "status", "difference", "interval"}]``: each finding
-    marked by the bootstrap over test recordings (``res`` from :func:`summarise`). The
+    """``[{"text", "ours", "report", "status", "rule", "difference", "interval",
+    "interval_seeds", "recordings", "seeds", "p", "p_holm", "p_improvement", ("size")}]``:
+    each finding marked from the two-level bootstrap (``res`` from :func:`summarise`):
+    decided when its Holm-adjusted p is below 0.05 and no rule (:func:`~U.rule`) makes it
+    inconclusive. Holm's family: every comparison of the table's confirmatory findings
+    (:func:`.protocol.confirmatory`); the exploratory ones form a family of their own. The
     report column is :func:`findings.evaluate_findings`'s, on the report's numbers."""
     from .findings import evaluate_findings as point_findings
 
     point = point_findings(tab, {n: {"metrics": r["metrics"], "initial": r["initial"]}
                                  for n, r in res["results"].items()})
-    sums, out = _Sums(res), []
-    for f, p in zip(tab["findings"], point):
-        ours, status, iv = _finding(tab, f, sums, set(res["results"]))
-        out.append({"text": f["text"], "ours": ours, "report": p["report"], "status": status,
-                    "difference": None if iv is None else iv.value,
-                    "interval": None if iv is None else [iv.low, iv.high],
-                    "recordings": None if iv is None else iv.n})
+    sums, have = _Sums(res), set(res["results"])
+    computed = [_compute(tab, f, sums, have) for f in tab["findings"]]
+    main = set(confirmatory(tab))
+    for family in ([c for i, c in enumerate(computed) if i in main],
+                   [c for i, c in enumerate(computed) if i not in main]):
+        pieces = [q for c in family for q in c.get("pieces", [])]
+        for q, p in zip(pieces, U.holm([q["test"].p for q in pieces])):
+            q["p_holm"] = p
+    out = []
+    for f, p, c in zip(tab["findings"], point, computed):
+        base = {"text": f["text"], "report": p["report"]}
+        if "na" in c:
+            out.append({**base, "ours": c["na"], "status": "n/a", "rule": None,
+                        "difference": None, "interval": None, "recordings": None})
+            continue
+        out.append({**base, **_finding(tab, f, c)})
     return out

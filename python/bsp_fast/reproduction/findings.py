@@ -1,14 +1,22 @@
-"""The report's findings, marked from one run per row: orderings, effect directions and
-sizes, "fails", "beats the trivial baseline" (``bsp-reproduce`` without ``--seeds``; with
-it, :mod:`.evidence` marks them from intervals). See docs/reproduce.md."""
+"""The report's findings on one run per row: orderings, effect directions and sizes,
+"fails", "beats the trivial baseline" (``bsp-reproduce`` without ``--seeds``). One run says
+in which direction a finding went (``direction``: holds or does not hold), not whether it
+reproduces: a mark needs the seeds' spread, so every finding of a one-run table is
+inconclusive by rule (:mod:`.evidence` marks them with ``--seeds``). The same comparisons
+on the report's own numbers fill the report column of both. See docs/reproduce.md."""
 from __future__ import annotations
 
+from ..metrics.uncertainty import MIN_SEEDS, UNSURE
 from ..training.tasks import format_metric, get_task
 from .table_files import rows_of
 
-__all__ = ["evaluate_findings", "format_value", "better", "YES", "NO", "NA"]
+__all__ = ["evaluate_findings", "format_value", "better", "YES", "NO", "NA", "HOLDS",
+           "FAILS", "ONE_RUN"]
 
 YES, NO, NA = "reproduced", "not reproduced", "n/a"
+HOLDS, FAILS = "holds", "does not hold"
+#: why a one-run table marks nothing (the rule of :mod:`bsp_fast.metrics.uncertainty`)
+ONE_RUN = f"one run per row (a mark needs at least {MIN_SEEDS} seeds: --seeds {MIN_SEEDS})"
 
 
 def better(tab, metric) -> int:
@@ -28,7 +36,7 @@ def _rel(a, b, relation, margin=0.0) -> bool:
 
 
 def _finding(tab, f, values: dict, initial: dict) -> tuple:
-    """(ours, report, status) of one finding; ``values[source][row]`` is the metric of a row
+    """(ours, report, direction) of one finding; ``values[source][row]`` is the metric of a row
     (source ``ours`` or ``report``); ``initial[row]`` the trivial baseline's (ours only)."""
     metric, sign = f["metric"], better(tab, f["metric"])
     fm = lambda v: format_value(tab, metric, v)  # noqa: E731
@@ -83,8 +91,8 @@ def _finding(tab, f, values: dict, initial: dict) -> tuple:
         out["report"] = (f"loss about {fm(f['report'])}{pp}", True)
     ours, ok = out["ours"]
     report = out["report"][0] or f.get("report_text", "stated in the report")
-    status = NA if ok is None else (YES if ok else NO)
-    return ours or "rows not run", report, status
+    direction = NA if ok is None else (HOLDS if ok else FAILS)
+    return ours or "rows not run", report, direction
 
 
 def _baseline(tab: dict, f: dict) -> tuple:
@@ -97,9 +105,10 @@ def _baseline(tab: dict, f: dict) -> tuple:
 
 
 def evaluate_findings(tab: dict, results: dict) -> list:
-    """``[{"text", "ours", "report", "status"}]`` for the findings of ``tab`` on the
-    ``results`` of :func:`reproduce`; status ``reproduced``, ``not reproduced`` or ``n/a``
-    (a row it needs was not run). Nothing is hard-coded: the numbers decide."""
+    """``[{"text", "ours", "report", "direction", "status", "rule"}]`` for the findings of
+    ``tab`` on the ``results`` of :func:`reproduce`: ``direction`` holds, does not hold or
+    n/a (a row it needs was not run) from the numbers; ``status`` inconclusive by the rule
+    :data:`ONE_RUN` (n/a where the direction is)."""
     out = []
     for f in tab["findings"]:
         m = f["metric"]
@@ -107,6 +116,8 @@ def evaluate_findings(tab: dict, results: dict) -> list:
                   "report": {r["name"]: (r.get("report") or {}).get(m) for r in tab["rows"]}}
         of = _baseline(tab, f)[1]
         initial = {r: of(results[r]["initial"]) for r in results}
-        ours, report, status = _finding(tab, f, values, initial)
-        out.append({"text": f["text"], "ours": ours, "report": report, "status": status})
+        ours, report, direction = _finding(tab, f, values, initial)
+        na = direction == NA
+        out.append({"text": f["text"], "ours": ours, "report": report, "direction": direction,
+                    "status": NA if na else UNSURE, "rule": None if na else ONE_RUN})
     return out

@@ -1,22 +1,26 @@
 """The one report writer of ``bsp-reproduce``: the table (our cells beside the report's
 values, the trivial baseline, epochs, cost columns), the findings with their marks, and
 the files beside them (``results.md``, ``results.json``, ``curves.png``, the table's
-figures, ``--breakdown``'s tables). One run per row: cells are the run's values and the
-findings are marked from them (:mod:`.findings`); ``--seeds N``: cells are mean ± std
-[interval] and the findings are marked from intervals (:mod:`.evidence`)."""
+figures, ``--breakdown``'s tables). One run per row: cells are the run's values and each
+finding shows the direction it went, unmarked (:mod:`.findings`); ``--seeds N``: cells are
+mean ± std [interval] and the findings are marked from the two-level intervals and tests,
+Holm-adjusted, with P(a beats b) (:mod:`.evidence`)."""
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
 from ..atomic import write_text
+from ..metrics.uncertainty import MIN_RECORDINGS, MIN_SEEDS
 from . import evidence
 from .cost_columns import COST_HEADER, cost_cells
 from .figures import draw_figures, learning_curves
 from .findings import evaluate_findings as point_findings, format_value
+from .protocol import finding_label, mark_exploratory, protocol_lines
 from .table_files import settings_cells, table_header
 
-__all__ = ["format_report", "format_table", "findings_of", "write_report"]
+__all__ = ["format_report", "format_table", "findings_of", "write_report", "results_table",
+           "status_text", "marks_note"]
 
 
 def _md(header, rows) -> str:
@@ -53,10 +57,52 @@ def _rows(tab: dict, res: dict, one: bool) -> tuple:
         trained = r.get("source") != "initial"
         seeds = list(r["seeds"].values()) if trained else []
         cells.append(", ".join(f"{s['best_epoch']}/{s['epochs']}" for s in seeds) or "–")
-        cells += cost_cells([s.get("run") for s in seeds], [s.get("seconds") for s in seeds]) \
-            if trained else ["–"] * len(COST_HEADER)
+        cells += cost_cells([s.get("run") for s in seeds], [s.get("seconds") for s in seeds],
+                            r.get("cost")) if trained else ["–"] * len(COST_HEADER)
         rows.append(cells)
     return header, rows
+
+
+def results_table(tab: dict, res: dict) -> str:
+    """The markdown of the table's rows alone, as :func:`format_table` prints it (the
+    README's rendering, :mod:`.readme`, reuses it)."""
+    return _md(*_rows(tab, res, res.get("seeds") is None))
+
+
+def marks_note(findings: list, budget: str) -> str:
+    """The rule of the marks, printed under the findings of a table with seeds (the
+    family's size counted from ``findings``: the comparisons Holm adjusted)."""
+    def count(exploratory):
+        return sum(p is not None and p == p for f in findings
+                   if bool(f.get("exploratory")) == exploratory for p in f.get("p_holm") or [])
+
+    extra = count(True)
+    return ("Marks: decided when the Holm-adjusted p of the two-level t test is below 0.05; "
+            f"Holm's family: this table file's {count(False)} confirmatory comparisons at "
+            f"budget {budget}" + (f" (the {extra} exploratory ones: a family of their own)"
+                                  if extra else "")
+            + f"; inconclusive by rule with fewer than {MIN_SEEDS} seeds in a row or "
+            f"{MIN_RECORDINGS} test recordings. "
+            "P(a beats b): the share of (seed of a, seed of b) pairs where a's value is "
+            "better, on the test recordings.")
+
+
+def _p(p) -> str:
+    return "–" if p is None or p != p else ("< 0.001" if p < 0.001 else f"{p:.3f}")
+
+
+def status_text(f: dict) -> str:
+    """A finding's mark as printed: with the rule that made it inconclusive and, with
+    seeds, the Holm-adjusted p of each comparison."""
+    why = [f"rule: {f['rule']}"] if f.get("rule") else []
+    if f.get("p_holm"):
+        why.append("p " + ", ".join(_p(p) for p in f["p_holm"]))
+    return f["status"] + (f" ({'; '.join(why)})" if why else "")
+
+
+def _improvement(f: dict) -> str:
+    return "; ".join("–" if q is None else f"{q['value']:.2f}"
+                     for q in f.get("p_improvement") or [None])
 
 
 #: printed over every smoke table: its runs only prove the plumbing
@@ -74,29 +120,30 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
     if one:
         text = [f"### {tab['title']} — budget {res['budget']}", "", *banner,
                 _md(header, rows), "",
-                _md(["finding (report)", "ours", "report", "status"],
-                    [[f["text"], f["ours"], f["report"], f["status"]] for f in findings])]
-        return "\n".join(text) + "\n"
+                _md(["finding (report)", "ours", "report", "in this run", "status"],
+                    [[finding_label(f), f["ours"], f["report"], f.get("direction", "–"),
+                      status_text(f)] for f in findings])]
+        return "\n".join(text + protocol_lines(tab, res)) + "\n"
     split = "seed varied with the seed" if res.get("split_seeds") else "fixed"
     text = [f"### {tab['title']} — budget {res['budget']}, {len(res['seeds'])} seeds "
             f"(split {split})", "", *banner,
-            "Cells: mean ± std over seeds [95 % interval of the mean, bootstrap over test "
-            "recordings resampled jointly for every seed"
-            + ("; with split seeds, of the ratio pooled over seeds" if res.get("split_seeds")
-               else "") + "]. "
+            "Cells: mean ± std over seeds [95 % interval of the mean over seeds and test "
+            "recordings: two-level bootstrap, t method]. "
             f"Rule: {tab.get('budget_rule', '').strip()}", "", _md(header, rows), "",
-            _md(["finding (report)", "ours: difference [95 % interval]", "report", "status"],
-                [[f["text"], f["ours"], f["report"], f["status"]] for f in findings])]
-    return "\n".join(text) + "\n"
+            _md(["finding (report)", "ours: difference [95 % interval, seeds and recordings] "
+                 "(seeds only)", "P(a beats b)", "report", "status (Holm-adjusted p)"],
+                [[finding_label(f), f["ours"], _improvement(f), f["report"], status_text(f)]
+                 for f in findings]), "", marks_note(findings, res["budget"])]
+    return "\n".join(text + protocol_lines(tab, res)) + "\n"
 
 
 def findings_of(tab: dict, res: dict) -> list:
     """The findings of ``res`` (from :func:`.runner.run_table`): marked from the single
     runs' values, or (``--seeds``) summarised and marked from intervals."""
     if res.get("seeds") is None:
-        return point_findings(tab, res["results"])
+        return mark_exploratory(tab, point_findings(tab, res["results"]))
     evidence.summarise(tab, res)
-    return evidence.evaluate_findings(tab, res)
+    return mark_exploratory(tab, evidence.evaluate_findings(tab, res))
 
 
 def format_report(tab: dict, res: dict) -> str:

@@ -7,7 +7,9 @@ checked. Both give one result shape (:func:`run_table`); the statistics over see
 recordings are :mod:`.evidence`'s, the report :mod:`.report`'s. See docs/reproduce.md.
 
 Configs go to ``OUT/TABLE-BUDGET/configs/ROW.yaml`` (one seed) or ``ROW-seed-S.yaml``,
-each usable as ``bsp-train --config``.
+each usable as ``bsp-train --config``. Every run is recorded under the table file's
+protocol hash (:mod:`.protocol`, ``OUT/TABLE-BUDGET/protocol.json``); runs of another hash
+are not mixed in unless ``allow_changed``.
 """
 from __future__ import annotations
 
@@ -21,7 +23,9 @@ from ..defaults import SEED
 from ..training import config as C
 from ..training.per_recording import FILE as BREAKDOWN
 from ..training.runs import RunError, read_run, resumable
+from .cost_columns import run_cost
 from .noisy_boxes import noisy_box_metrics
+from .protocol import guard, record_runs
 from .table_files import (BUDGETS, RULE_KEYS, check_budget_rule, load_table, prepare_row_data,
                           row_options, wanted_rows)
 
@@ -52,6 +56,13 @@ def add_options(p) -> None:
                         "thread each (default: the number of cores)")
 
 
+def row_seeds(row: dict, seeds, budget: str):
+    """The seeds ``row`` is trained with: ``seeds``, or its first ``max_seeds[budget]`` (a
+    row whose cost per seed the table file gives as the reason)."""
+    cap = (row.get("max_seeds") or {}).get(budget)
+    return seeds if seeds is None or cap is None else seeds[:cap]
+
+
 def _plan(tab, data, budget, base: Path, wanted, seeds, split_seeds, overrides, threads,
           convert: bool = True):
     """``[(row, seed, run_dir, opts)]``; ``seeds`` None: one run per row in ``ROW/`` with
@@ -60,7 +71,7 @@ def _plan(tab, data, budget, base: Path, wanted, seeds, split_seeds, overrides, 
     for row in tab["rows"]:
         if row["name"] not in wanted or row.get("initial_of"):
             continue
-        for seed in seeds or [None]:
+        for seed in row_seeds(row, seeds, budget) or [None]:
             extra = dict(overrides or {})
             run_dir = base / row["name"]
             if seed is not None:
@@ -157,6 +168,18 @@ def _run(todo, jobs: int, quiet: bool, log) -> None:
             err.close()
 
 
+def _run_names(tab, wanted, seeds, base: Path, budget: str) -> dict:
+    """``{name: run_dir}`` of the runs of ``wanted`` rows: name ``ROW`` (one seed) or
+    ``ROW/seed-S``, as the protocol ledger records them."""
+    out = {}
+    for row in tab["rows"]:
+        if row["name"] in wanted and not row.get("initial_of"):
+            for seed in row_seeds(row, seeds, budget) or [None]:
+                name = row["name"] if seed is None else f"{row['name']}/seed-{seed}"
+                out[name] = base / name
+    return out
+
+
 def _seed_result(run_dir: Path) -> dict:
     run = read_run(run_dir)
     m = run["metrics"]
@@ -171,10 +194,16 @@ def _seed_result(run_dir: Path) -> dict:
 def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | None = None,
               split_seeds: bool = False, jobs: int | None = None, rows=None, overrides=None,
               force: bool = False, quiet: bool = True, dry_run: bool = False,
-              log=print) -> dict:
+              allow_changed: bool = False, log=print) -> dict:
     """Trains the rows of ``table`` (all, or the names in ``rows``), reusing finished runs
-    unless ``force``, and returns ``{"table", "budget", "dir", "seeds", "split_seeds",
-    "results": {row: {"seeds": {seed: {...one run...}}, "source", "noise", "mjp"}}}``.
+    unless ``force``, and returns ``{"table", "budget", "dir", "data", "seeds",
+    "split_seeds", "protocol", "results": {row: {"seeds": {seed: {...one run...}},
+    "source", "noise", "mjp", "cost"}}}``.
+
+    Before anything is written, the runs it would reuse or continue are checked against
+    the folder's protocol ledger (:func:`.protocol.guard`): one made under another version
+    of the table file or other ``overrides`` raises :class:`.protocol.ProtocolChanged`
+    unless ``allow_changed`` (then the mix is recorded in ``protocol["mixed"]``).
 
     ``seeds=None``: one run per row in ``ROW/`` with the table's options' seed, trained in
     this process (the single-run table; ``res["seeds"]`` is None and each row also carries
@@ -198,11 +227,15 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
                          "split")
     wanted = wanted_rows(tab, rows)
     base = Path(out) / f"{tab['table']}-{budget}"
+    names = _run_names(tab, wanted, seed_values, base, budget)
+    kept = [n for n, d in names.items()  # reused or continued, not retrained
+            if not force and ((d / "metrics.json").is_file() or resumable(d) is not None)]
+    protocol, ledger = guard(base, tab, budget, kept, overrides, allow_changed=allow_changed)
     plan = _plan(tab, data, budget, base, wanted, seed_values, split_seeds, overrides,
                  1 if jobs > 1 else None, convert=not dry_run)
     import yaml
 
-    todo = []
+    todo, fresh = [], []
     for row, seed, run_dir, opts in plan:
         label = row["name"] if seed is None else f"{row['name']} seed {seed}"
         name = row["name"] if seed is None else f"{row['name']}-seed-{seed}"
@@ -217,10 +250,14 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
             log(f"[{label}] reusing {run_dir} (--force to train again)")
         else:  # an interrupted run of an earlier call continues (unless --force)
             todo.append((label, cfg_path, None if force else resumable(run_dir)))
-    out_res = {"table": tab["table"], "budget": budget, "dir": str(base),
+            if todo[-1][2] is None:
+                fresh.append(str(run_dir.relative_to(base)))
+    out_res = {"table": tab["table"], "budget": budget, "dir": str(base), "data": str(data),
                "seeds": seed_values, "split_seeds": bool(split_seeds), "results": {}}
     if dry_run:
         return out_res
+    record_runs(base, protocol, ledger, fresh)  # before training: interrupted runs count
+    out_res["protocol"] = dict(protocol, runs={n: ledger["runs"].get(n) for n in names})
     if todo:
         if jobs > 1:
             _convert_once(plan)
@@ -235,6 +272,8 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
         if seed is None:  # the single run's own numbers, as the one-run report reads them
             r.update({k: one[k] for k in ("metrics", "initial", "baseline", "epochs",
                                           "best_epoch", "seconds", "run")})
+    for r in results.values():  # parameters and FLOPs of the row's model, its first run
+        r["cost"] = run_cost(next(iter(r["seeds"].values()))["run"])
     for row in tab["rows"]:  # rows read from another row's trivial baseline
         src = row.get("initial_of")
         if row["name"] in wanted and src and src in results:
@@ -242,6 +281,7 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
             if seed_values is None:
                 r.update(metrics=dict(r["initial"]), epochs=None, best_epoch=None, seconds={},
                          run=r["run"] + " (initial metrics)")
+            r["cost"] = {}  # no model of its own
     return out_res
 
 

@@ -72,39 +72,57 @@ def _stat(values: list) -> tuple:
     return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0, len(v)
 
 
+def _tables_by_title(docs: dict) -> list:
+    """The first copy of each table title over every document, in order of appearance
+    (a saved document older than a table, e.g. the time-to-event one, lacks it)."""
+    seen: dict = {}
+    for seed_docs in docs.values():
+        for doc in seed_docs:
+            for t in doc["tables"]:
+                seen.setdefault(t["title"], t)
+    return list(seen.values())
+
+
 def aggregate(docs: dict) -> list:
-    """One entry per breakdown table (in the documents' order): ``title``, ``by``,
-    ``count`` (its unit), ``metric`` and ``label`` (the table's first value column),
-    ``bins`` and, per row, ``{bin: {"mean", "std", "seeds", "count"}}`` (``count``: the
-    mean over seeds; ``seeds``: how many had a value in the bin)."""
+    """One entry per breakdown table (in the documents' order) and value column it
+    aggregates (the first value column, or the table's ``aggregate`` list; entries past
+    the first get the label in their title): ``title``, ``by``, ``count`` (its unit),
+    ``metric`` and ``label``, ``bins`` and, per row, ``{bin: {"mean", "std", "seeds",
+    "count"}}`` (``count``: the mean over seeds; ``seeds``: how many had a value in the
+    bin)."""
     out = []
-    first = next(iter(docs.values()))[0]
-    for t_index, t0 in enumerate(first["tables"]):
-        key = _main_key(t0["columns"])
-        bins: list = []
-        per_row: dict = {}
-        for name, seed_docs in docs.items():
-            cells: dict = {}
-            for doc in seed_docs:
-                table = doc["tables"][t_index]
-                if table["title"] != t0["title"]:
-                    raise ValueError(f"breakdown of row {name}: table {t_index} is "
-                                     f"{table['title']!r}, expected {t0['title']!r}")
-                for r in table["rows"]:
-                    if r["bin"] not in bins:
-                        bins.append(r["bin"])
-                    c = cells.setdefault(r["bin"], {"values": [], "counts": []})
-                    c["values"].append(r.get(key))
-                    c["counts"].append(r["count"])
-            per_row[name] = {}
-            for b, c in cells.items():
-                mean, std, n = _stat(c["values"])
-                per_row[name][b] = {"mean": mean, "std": std, "seeds": n,
-                                    "count": float(np.mean(c["counts"]))}
-        out.append({"title": t0["title"], "by": t0["by"], "count": t0["count"],
-                    "metric": key, "label": t0["columns"][key], "bins": bins,
-                    "rows": per_row})
+    for t0 in _tables_by_title(docs):
+        for i, key in enumerate(t0.get("aggregate") or [_main_key(t0["columns"])]):
+            entry = _aggregate_one(docs, t0, key)
+            if i:
+                entry["title"] = f"{t0['title']} ({entry['label']})"
+            out.append(entry)
     return out
+
+
+def _aggregate_one(docs: dict, t0: dict, key: str) -> dict:
+    """:func:`aggregate`'s entry of the table titled like ``t0`` for value column ``key``."""
+    bins: list = []
+    per_row: dict = {}
+    for name, seed_docs in docs.items():
+        cells: dict = {}
+        for doc in seed_docs:
+            table = next((t for t in doc["tables"] if t["title"] == t0["title"]), None)
+            if table is None:
+                continue
+            for r in table["rows"]:
+                if r["bin"] not in bins:
+                    bins.append(r["bin"])
+                c = cells.setdefault(r["bin"], {"values": [], "counts": []})
+                c["values"].append(r.get(key))
+                c["counts"].append(r["count"])
+        per_row[name] = {}
+        for b, c in cells.items():
+            mean, std, n = _stat(c["values"])
+            per_row[name][b] = {"mean": mean, "std": std, "seeds": n,
+                                "count": float(np.mean(c["counts"]))}
+    return {"title": t0["title"], "by": t0["by"], "count": t0["count"],
+            "metric": key, "label": t0["columns"][key], "bins": bins, "rows": per_row}
 
 
 def _value(metric: str, x: float) -> str:

@@ -7,7 +7,8 @@ A table file holds ``common`` options, ``budgets`` (smoke / quick / full option 
 ``findings`` and ``budget_rule`` (the training rule every row follows, in words); the
 ablation tables also use ``own_updates`` (a row's own update cap, with its reason),
 ``data_suffix`` (a row reads a sibling dataset: ``--data`` plus the suffix; the table's
-``data_variants`` says how to make each) and ``figures`` (:mod:`.figures`).
+``data_variants`` says how to make each) and ``figures`` (:mod:`.figures`). The registered
+protocol's fields, ``deviations`` and a finding's ``exploratory``, are :mod:`.protocol`'s.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from pathlib import Path
 from .. import defaults
 from ..training import config as C
 from .figures import check_figures
+from .protocol import check_deviations, check_exploratory
 from ..training.tasks import get_task
 
 __all__ = ["wanted_rows", "table_header", "settings_cells", "TABLES", "BUDGETS", "KINDS",
@@ -129,6 +131,18 @@ def load_table(table) -> dict:
         if "crop_box" in r and (doc["task"] != "pose_estimation" or r["crop_box"] not in ROW_CROP_BOXES):
             raise ValueError(f"{path}: row {r['name']!r}: crop_box {r['crop_box']!r}; a "
                              f"pose_estimation row may ask for one of {list(ROW_CROP_BOXES)}")
+    for r in doc["rows"]:  # a row too costly for the table's seed count (issue #37 rule)
+        cap = r.get("max_seeds")
+        if cap is None:
+            continue
+        if not isinstance(cap, dict) or set(cap) - set(doc["budgets"]) or not all(
+                isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in cap.values()):
+            raise ValueError(f"{path}: row {r['name']!r}: max_seeds must map budgets of "
+                             f"{list(doc['budgets'])} to a number of seeds >= 1, got {cap!r}")
+        if not str(r.get("max_seeds_why") or "").strip():
+            raise ValueError(f"{path}: row {r['name']!r}: max_seeds needs a max_seeds_why "
+                             "(its measured cost per seed); its findings are then "
+                             "inconclusive by the 5-seed rule")
     for f in doc["findings"]:
         if f.get("kind") not in KINDS:
             raise ValueError(f"{path}: finding kind {f.get('kind')!r}; allowed: {', '.join(KINDS)}")
@@ -143,6 +157,8 @@ def load_table(table) -> dict:
         if f.get("metric") not in doc["metrics"]:
             raise ValueError(f"{path}: finding {f.get('text')!r}: metric {f.get('metric')!r} "
                              f"is not one of {list(doc['metrics'])}")
+    check_exploratory(doc, path)
+    doc["deviations"] = check_deviations(doc, path)
     doc["path"] = str(path)
     check_budget_rule(doc)
     check_figures(doc)

@@ -9,26 +9,27 @@ line (``training.train.resolve_config``; docs/design.md says why ``--config`` is
 ``ActionConfigFile``).
 
 Adding an option is one entry in ``OPTIONS``: ``_o(name, kind, default, help, group,
-...)``, where ``kind`` names a converter of ``KINDS`` or is a function ``value -> value``
-that raises :class:`ConfigError` (or ``ValueError``) for a bad value. The same entry is an
-override of ``bsp-reproduce`` (every option but the run's identity) and, with
-``scoring=True``, of ``bsp-eval`` and ``bsp-predict`` (:mod:`.overrides`): one declaration,
-the same names, types and messages everywhere.
+...)``, where ``kind`` names a converter of ``KINDS`` (:mod:`bsp_fast.option_kinds`) or is a
+function ``value -> value`` that raises :class:`ConfigError` (or ``ValueError``) for a bad
+value. The same entry is an override of ``bsp-reproduce`` (every option but the run's
+identity) and, with ``scoring=True``, of ``bsp-eval`` and ``bsp-predict``
+(:mod:`.overrides`): one declaration, the same names, types and messages everywhere.
 """
 from __future__ import annotations
 
 import argparse
-import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..data import mix_tables  # mixing tables (no torch)
 from ..defaults import SEED
+from ..option_kinds import KINDS, ConfigError, parse_hp  # value converters, re-exported
 from .tasks import TASKS, get_task  # the task registry (no torch)
 
 __all__ = ["OPTIONS", "BY_NAME", "KINDS", "ConfigError", "defaults", "parser",
            "parse_command_line", "read_yaml", "normalise", "validate",
-           "parse_hp", "dump", "write_yaml"]
+           "parse_hp", "dump", "write_yaml", "MergeItems"]
 
 ACCELERATORS = ("auto", "cpu", "gpu")
 STRATEGIES = ("auto", "ddp", "ddp_spawn", "ddp_find_unused_parameters_true")
@@ -37,17 +38,11 @@ LOGGERS = ("csv", "tensorboard", "wandb")
 LIFTING_TARGETS = ("absolute", "world", "camera")
 
 
-class ConfigError(ValueError, argparse.ArgumentTypeError):
-    """A bad option value or an unknown option (exit code 2 on the command line). Also an
-    ``ArgumentTypeError``: raised by a converter while jsonargparse parses the command
-    line, its message is the one the parser reports."""
-
-
 @dataclass(frozen=True)
 class Option:
     name: str
-    #: a KINDS name (int, float, str, path, flag, bool, mjp, hp, devices) or a function
-    #: ``value -> value`` raising ConfigError or ValueError
+    #: a KINDS name (int, float, str, path, flag, bool, mjp, hp, devices, mix, files) or a
+    #: function ``value -> value`` raising ConfigError or ValueError
     kind: object
     default: object
     help: str
@@ -131,8 +126,21 @@ OPTIONS: tuple = (
        minimum=0.0, metavar="S"),
     _o("box_jitter_shift", "float", 0.0, "pose_estimation: train-time box jitter, centre "
        "moved by U[-T, T] x side per axis (0: off)", "data", minimum=0.0, metavar="T"),
+    _o("image_augment", "bool", False, "pose_estimation: augment the train crops (random "
+       "flips with the left/right joints swapped, zoom x U[0.9, 1.1], shift, rotation by "
+       "--image-rotation, colour jitter), the joints moved with the pixels", "data"),
+    _o("image_rotation", "float", 15.0, "pose_estimation: with --image-augment, rotation "
+       "uniform in [-DEG, DEG] degrees about the crop centre", "data", minimum=0.0,
+       metavar="DEG"),
     _o("lifting_target", "str", "absolute", "3D frame of the lifting targets", "data",
        choices=LIFTING_TARGETS),
+    _o("mix", "mix", None, "train on clip files in stated shares: a mixing table (name in "
+       "experiments/mix/, YAML file, or in --config the table itself); config.yaml records "
+       "it (docs/interop.md, Mixed training)", "data", metavar="TABLE"),
+    _o("mix_data", "files", {}, "NAME=FILE: a --mix or --test-on source's clip file (repeatable;"
+       " a source marked data: true reads --data)", "data", metavar="NAME=FILE", scoring=True),
+    _o("test_on", "str", None, "with --mix: test on this source's test split alone (default: "
+       "every source's)", "data", metavar="NAME", scoring=True),
     # ------------------------------------------------------------------ model
     _o("hp", "hp", {}, "a model hyper-parameter, KEY=VALUE (repeatable; YAML value syntax); "
        "checked against the model's hyper-parameters", "model", metavar="KEY=VALUE"),
@@ -164,6 +172,10 @@ OPTIONS: tuple = (
        "support it; on a CPU with AVX512-BF16/AMX decided by a short timed probe of this "
        "model on this machine (cached; config.yaml says what and why); 32 otherwise "
        "(docs/training.md, Precision)", "training", choices=PRECISIONS, scoring=True),
+    _o("compile", "str", "off", "torch.compile the model (inductor) before training: on or "
+       "off; off by default because on CPU it was slower end to end for every model at the "
+       "quick budgets, compile time included (docs/performance.md, Training)", "training",
+       choices=("off", "on")),
     _o("checkpoint_every", "str", "10m", "also save checkpoints/last.ckpt every this long "
        "within an epoch (e.g. 10m, 90s, 1h; 0: at epoch ends only), so a killed run "
        "resumes near where it stopped (--resume)", "training", metavar="DURATION"),
@@ -180,104 +192,6 @@ def defaults() -> dict:
     """Every option at its built-in default."""
     return {o.name: (dict(o.default) if isinstance(o.default, dict) else o.default)
             for o in OPTIONS}
-
-
-# ---------------------------------------------------------------------- converters (KINDS)
-def _int(value) -> int:
-    if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
-        raise ValueError
-    return int(value)
-
-
-def _float(value) -> float:
-    if isinstance(value, bool) or not math.isfinite(value := float(value)):
-        raise ValueError
-    return value
-
-
-def _str(value) -> str:
-    if isinstance(value, (dict, list, bool)):
-        raise ValueError
-    return str(value)
-
-
-def _bool(value) -> bool:
-    if isinstance(value, bool):
-        return value
-    text = str(value).strip().lower()
-    if text in ("1", "true", "yes", "on"):
-        return True
-    if text in ("0", "false", "no", "off"):
-        return False
-    raise ConfigError(f"expected a boolean (true/false), got {value!r}")
-
-
-def _mjp(value):
-    if isinstance(value, str):
-        parts = [p for p in value.replace(" ", "").split(",") if p]
-        try:
-            value = [float(p) for p in parts]
-        except ValueError:
-            raise ConfigError(f"mjp must be a number or 26 comma-separated numbers, "
-                              f"got {value!r}") from None
-    if isinstance(value, (list, tuple)):
-        value = [float(v) for v in value]
-        if len(value) == 1:
-            value = value[0]
-        elif len(value) != 26:
-            raise ConfigError(f"mjp takes one value or 26 (one per joint), got {len(value)}")
-    if isinstance(value, bool) or not isinstance(value, (int, float, list)):
-        raise ConfigError(f"mjp must be a number or a list of 26 numbers, got {value!r}")
-    values = value if isinstance(value, list) else [value]
-    if any(not (0.0 <= float(v) <= 1.0) or math.isnan(float(v)) for v in values):
-        raise ConfigError(f"mjp values must lie in [0, 1], got {value!r}")
-    return value if isinstance(value, list) else float(value)
-
-
-def parse_hp(items) -> dict:
-    """``["hidden=32", "layers=1"]`` (or a dict) -> ``{"hidden": 32, "layers": 1}``; values
-    in YAML syntax (numbers, true/false, null, strings, [lists])."""
-    if items is None:
-        return {}
-    if isinstance(items, dict):
-        return {str(k).replace("-", "_"): v for k, v in items.items()}
-    import yaml
-
-    out = {}
-    for item in ([items] if isinstance(items, str) else items):
-        key, sep, text = str(item).partition("=")
-        if not sep or not key.strip():
-            raise ConfigError(f"--hp expects KEY=VALUE, got {item!r}")
-        try:
-            out[key.strip().replace("-", "_")] = yaml.safe_load(text) if text.strip() else ""
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"--hp {item!r}: value is not valid YAML ({exc})") from None
-    return out
-
-
-def _devices(value):
-    if isinstance(value, bool):
-        raise ConfigError(f"devices must be 'auto', a count or a list of indices, got {value!r}")
-    if isinstance(value, int):
-        if value < 1 and value != -1:
-            raise ConfigError(f"devices must be >= 1 (or -1 for all), got {value}")
-        return value
-    if isinstance(value, (list, tuple)):
-        return [int(v) for v in value]
-    text = str(value).strip()
-    if text == "auto":
-        return "auto"
-    try:
-        if "," in text:
-            return [int(v) for v in text.split(",") if v]
-        return _devices(int(text))
-    except ValueError:
-        raise ConfigError(f"devices must be 'auto', a count or a comma-separated list of "
-                          f"indices, got {value!r}") from None
-
-
-KINDS = {"int": _int, "float": _float, "str": _str, "path": _str, "flag": _bool,
-         "bool": _bool, "mjp": _mjp, "hp": parse_hp, "devices": _devices}
 
 
 # ---------------------------------------------------------------------- whole configs
@@ -320,6 +234,8 @@ def validate(cfg: dict) -> dict:
     if cfg.get("model") is None:
         raise ConfigError(f"no model given for task {cfg['task']!r}; allowed: "
                           + ", ".join(names))
+    if cfg.get("mix") is not None or cfg.get("mix_data") or cfg.get("test_on"):
+        cfg = mix_tables.check_run(cfg, error=ConfigError)  # may set data: the first file
     if cfg.get("data") is None:
         raise ConfigError("no data given (--data DATASET_DIR or clips.h5)")
     if cfg["label"] != "last" and not cfg["label"].startswith("any:"):
@@ -379,7 +295,7 @@ def write_yaml(cfg: dict, path, extra: dict | None = None) -> None:
 
 
 # ---------------------------------------------------------------------- command line
-class _MergeHp(argparse.Action):
+class MergeItems(argparse.Action):
     """``--hp a=1 --hp b=2`` -> ``{"a": 1, "b": 2}`` (each item already a dict)."""
 
     def __call__(self, parser, namespace, values, option_string=None):
@@ -420,8 +336,8 @@ def parser(prog: str = "bsp-train", description: str | None = None, epilog: str 
         else:
             kw.update(type=o.convert, metavar=o.metavar or
                       ("|".join(o.choices) if o.choices else o.name.upper()))
-            if o.kind == "hp":
-                kw.update(action=_MergeHp)
+            if o.kind in ("hp", "files"):
+                kw.update(action=MergeItems)
         groups[o.group].add_argument("--" + o.name.replace("_", "-"), **kw)
     return p
 

@@ -21,10 +21,15 @@ Bins are fixed (the same rows for every run, so tables compare across runs):
 * realised missing joints, 2D-input tasks: joints of the frame missing from the input
   (``~visible``, after ``--mjp``), bins :data:`MISSING_BINS`; classification bins a clip
   by its missing joints per frame, averaged over the clip and rounded;
-* profile: ``age/gender`` of the clip's meta.
+* profile: ``age/gender`` of the clip's meta;
+* time to event, classification on benchmark windows: frames from the clip's last frame
+  to its event (``meta/tte``, docs/hdf5-schema.md), bins :data:`TTE_BINS` (the benchmark's
+  1 to 2 s before the event, cut in three). A file without event (not benchmark windows,
+  or written before ``meta/tte`` was stored) gets a note saying why instead.
 
-Time to event is not stored in a clip file (the planner's event frame of the benchmark's
-windows is not written, docs/hdf5-schema.md), so there is no time-to-event table.
+Classification scores each clip by the model's P(crossing) in float64
+(:func:`bsp_fast.metrics.ranking.crossing_probability`), as the run's metrics do, so the
+summary's AUROC and AP are the run's ``auroc`` and ``ap``.
 """
 from __future__ import annotations
 
@@ -35,12 +40,12 @@ import torch
 from lightning.pytorch.callbacks import Callback
 
 from .. import metrics as M
-from ..metrics.threshold_free import positive_scores
+from ..metrics import ranking
 from ..skeleton import HIPS, JOINT_NAMES, NUM_JOINTS
 from .tasks import get_task
 
 __all__ = ["BreakdownCollector", "build_breakdown", "bin_index", "FILE", "HEIGHT_EDGES_PX",
-           "DISTANCE_EDGES_M", "MISSING_BINS", "PCK_ALPHA", "TTE_NOTE"]
+           "DISTANCE_EDGES_M", "MISSING_BINS", "PCK_ALPHA", "TTE_BINS", "CLS_COLUMNS"]
 
 FILE = "test_breakdown.json"
 HEIGHT_EDGES_PX = (0.0, 50.0, 100.0, 200.0, 400.0, math.inf)
@@ -48,8 +53,12 @@ DISTANCE_EDGES_M = (0.0, 10.0, 20.0, 30.0, 50.0, math.inf)
 #: inclusive ranges of missing joints per frame
 MISSING_BINS = ((0, 0), (1, 2), (3, 5), (6, 10), (11, 18), (19, 25), (26, 26))
 PCK_ALPHA = 0.05
-TTE_NOTE = ("no time-to-event table: the clip file does not store the benchmark windows' "
-            "event frame (docs/hdf5-schema.md)")
+#: inclusive ranges of frames to the event; the converter's windows reach 61 frames (SPEC
+#: section 4 keeps frames from event - L - 60, so the earliest window ends at event - 61)
+TTE_BINS = ((30, 39), (40, 49), (50, 61))
+#: classification's summary and time-to-event columns
+CLS_COLUMNS = {"f1": "F1", "precision": "precision", "recall": "recall",
+               "accuracy": "accuracy", "auroc": "AUROC", "ap": "AP", "crossing": "crossing clips"}
 #: the values of ``Task.breakdown_scores`` this module collects and groups
 SCORES = ("logits", "joint_error_mm", "pose_pairs")
 
@@ -89,7 +98,7 @@ class BreakdownCollector(Callback):
             raise ValueError(f"task {spec.name!r} has no breakdown (breakdown_scores "
                              f"{spec.breakdown_scores!r}, not one of {list(SCORES)})")
         if spec.breakdown_scores == "logits":
-            part["score"] = np.asarray(positive_scores(out.cpu().numpy()))
+            part["score"] = ranking.crossing_probability(out)
             part["pred"] = M.predicted_labels(out).cpu().numpy()
             part["label"] = batch["label"].cpu().numpy()
             missing = (~batch["visible"].bool()).sum(-1).double().mean(-1)
@@ -117,8 +126,11 @@ class BreakdownCollector(Callback):
 
 # ---------------------------------------------------------------------- clip-file values
 def _per_frame_values(h5_path, rows: np.ndarray, need_distance: bool) -> dict:
-    """``{"height": (N, L) px, "distance": (N, L) m}`` of the stored test ``rows``."""
+    """``{"height": (N, L) px, "distance": (N, L) m, "tte": (N,) frames, "tte_problem":
+    why there is no time to event (None: every clip has one)}`` of the stored test
+    ``rows``."""
     from ..conversion.vds import open_clip_file
+    from ..data.datasets import NO_EVENT, tte_problem
     from ..geometry import rotation_matrix
 
     uniq, inverse = np.unique(rows, return_inverse=True)
@@ -127,6 +139,10 @@ def _per_frame_values(h5_path, rows: np.ndarray, need_distance: bool) -> dict:
         g = f["test"]
         box = g["targets/bboxes"][uniq].astype(np.float64)  # (n, L, 2, 2)
         out["height"] = (box[:, :, 1, 1] - box[:, :, 0, 1])[inverse]
+        has = "meta/tte" in g
+        out["tte"] = (g["meta/tte"][uniq].astype(np.int64)[inverse] if has
+                      else np.full(len(rows), NO_EVENT, np.int64))
+        out["tte_problem"] = tte_problem(h5_path, has, out["tte"], dict(f.attrs))
         if need_distance:
             hips = g["targets/world_pose_loc"][uniq][:, :, HIPS].astype(np.float64)
             cam = g["meta/camera_transform"][uniq].astype(np.float64)
@@ -199,12 +215,29 @@ def _cls_stats(score, pred, label) -> dict:
     n = int(len(label))
     out = {"count": n, "crossing": int(label.sum())}
     if n == 0:
-        return out | {k: math.nan for k in ("f1", "precision", "recall", "accuracy", "auroc",
-                                             "average_precision")}
+        return out | {k: math.nan for k in CLS_COLUMNS if k != "crossing"}
     out.update(f1=float(M.f1_score(pred, label)), precision=float(M.precision(pred, label)),
                recall=float(M.recall(pred, label)), accuracy=float(M.accuracy(pred, label)),
-               auroc=M.auroc(score, label), average_precision=M.average_precision(score, label))
+               auroc=ranking.auroc(score, label), ap=ranking.average_precision(score, label))
     return out
+
+
+def _tte_table(tte: np.ndarray, stats, bins: dict) -> dict:
+    """Clips per :data:`TTE_BINS` bin (and ``other``, only if some clip lies outside)."""
+    labels = [f"{lo}-{hi}" for lo, hi in TTE_BINS]
+    index = np.full(len(tte), len(TTE_BINS), np.int64)
+    for i, (lo, hi) in enumerate(TTE_BINS):
+        index[(tte >= lo) & (tte <= hi)] = i
+    if (index == len(TTE_BINS)).any():  # e.g. an importer's wider --tte: counts add up
+        labels.append("other")
+    bins["time_to_event"] = {"rows": labels, "per": "clip (frames from its last frame to "
+                             "the event, meta/tte)"}
+    cols = {k: v for k, v in CLS_COLUMNS.items() if k != "crossing"}
+    table = _table("per time to event", "frames to the event", "clips",
+                   {"crossing": "crossing clips", **cols},
+                   _grouped(labels, index, stats), len(tte))
+    table["aggregate"] = ["f1", "auroc", "ap"]  # bsp-reproduce --breakdown: mean ± std
+    return table
 
 
 def _grouped(labels: list, index: np.ndarray, stats) -> list:
@@ -231,7 +264,8 @@ def build_breakdown(collector: BreakdownCollector, task: str, metrics: dict | No
     notes, bins = [], {}
     if spec.breakdown_per_clip:
         doc = _classification(parts, rows, profiles, per_frame, bins)
-        notes.append(TTE_NOTE)
+        if per_frame["tte_problem"] is not None:
+            notes.append(f"no time-to-event table: {per_frame['tte_problem']}")
     else:
         doc = _frame_tables(spec, parts, profiles, per_frame, bins, notes)
     doc.update(task=task, split="test", cost=dict(collector.cost), bins=bins, notes=notes,
@@ -248,8 +282,7 @@ def _classification(parts, rows, profiles, per_frame, bins) -> dict:
     def stats(mask):
         return _cls_stats(score[mask], pred[mask], label[mask])
 
-    cols = {"crossing": "crossing clips", "f1": "F1", "auroc": "AUROC",
-            "average_precision": "AP"}
+    cols = {"crossing": "crossing clips", "f1": "F1", "auroc": "AUROC", "ap": "AP"}
     h_labels = [_edges_label(a, b, "px") for a, b in zip(HEIGHT_EDGES_PX, HEIGHT_EDGES_PX[1:])]
     bins["height_px"] = {"rows": h_labels, "per": "clip (mean over its frames)"}
     bins["missing_joints"] = {"rows": _missing_labels(), "per": "clip (mean per frame, rounded)"}
@@ -261,12 +294,11 @@ def _classification(parts, rows, profiles, per_frame, bins) -> dict:
                _grouped(prof, prof_idx, stats), N),
         _table("per realised missing-joint count", "missing joints per frame", "clips", cols,
                _grouped(_missing_labels(), _missing_index(missing), stats), N)]
+    if per_frame["tte_problem"] is None:
+        tables.append(_tte_table(per_frame["tte"], stats, bins))
     summary = _cls_stats(score, pred, label)
     return {"totals": {"clips": N, "frames": N * per_frame["height"].shape[1]},
-            "summary": summary, "tables": tables,
-            "summary_columns": {"f1": "F1", "precision": "precision", "recall": "recall",
-                                "accuracy": "accuracy", "auroc": "AUROC",
-                                "average_precision": "AP", "crossing": "crossing clips"},
+            "summary": summary, "tables": tables, "summary_columns": dict(CLS_COLUMNS),
             "summary_count": "clips"}
 
 

@@ -50,7 +50,10 @@ def load_run(run, which: str = "best", data=None, **overrides):
     cfg = C.defaults()
     saved = {k: v for k, v in (info.get("config") or {}).items() if k in C.BY_NAME}
     cfg.update(C.normalise(saved, f"{ckpt} (saved config)"))
-    cfg.update(C.normalise({k: v for k, v in overrides.items() if v is not None}))
+    given = C.normalise({k: v for k, v in overrides.items() if v is not None})
+    if "mix_data" in given:  # more files (e.g. a dataset to test on): the mix's stay
+        given["mix_data"] = {**cfg["mix_data"], **given["mix_data"]}
+    cfg.update(given)
     h5 = None
     # the run's config.yaml, as open_run read it (a bare checkpoint has no "resolved")
     resolved = (opened["config"].get("resolved") or {}) if run_dir is not None else {}

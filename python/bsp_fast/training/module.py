@@ -82,8 +82,9 @@ class TaskModule(pl.LightningModule):
         self.train_loss.update(loss.detach().float(), n)
         if "normaliser_fallback" in batch:
             self.train_fallback.update(batch["normaliser_fallback"].reshape(-1).float())
-        self.log("loss", loss.detach(), prog_bar=True, logger=False, on_step=True,
-                 on_epoch=False, batch_size=n)
+        if self._bar_loss:  # a Lightning log call costs ~1 ms: only for an interactive bar
+            self.log("loss", loss.detach(), prog_bar=True, logger=False, on_step=True,
+                     on_epoch=False, batch_size=n)
         return loss
 
     def _eval_step(self, batch: dict, metrics: TaskMetrics) -> torch.Tensor:
@@ -129,8 +130,14 @@ class TaskModule(pl.LightningModule):
             self.log("val_loss", float(values["loss"]), prog_bar=True, logger=False,
                      sync_dist=True)
 
+    #: whether training steps log their loss for Lightning's interactive progress bar
+    _bar_loss = True
+
     def on_fit_start(self) -> None:
         self._clock0 = (time.process_time(), time.perf_counter())
+        from lightning.pytorch.callbacks import TQDMProgressBar
+
+        self._bar_loss = isinstance(self.trainer.progress_bar_callback, TQDMProgressBar)
 
     def on_train_epoch_end(self) -> None:
         # cost so far, this epoch's validation included (it runs before this hook): the

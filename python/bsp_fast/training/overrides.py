@@ -24,6 +24,8 @@ def _override_kwargs(o: C.Option) -> dict:
         return dict(kw, action="store_const", const=True)
     if o.kind == "bool":
         return dict(kw, action=argparse.BooleanOptionalAction)
+    if o.kind == "files":  # --mix-data a=X --mix-data b=Y: both, as bsp-train merges them
+        kw["action"] = C.MergeItems
     return dict(kw, type=_argparse_type(o), metavar=o.metavar or
                 ("|".join(o.choices) if o.choices else o.name.upper()))
 

@@ -4,7 +4,9 @@ The metrics and how a model's output is scored belong to the task objects
 (``bsp_fast.training.tasks``); :class:`TaskMetrics` holds a task's torchmetrics states,
 the loss and the reduction. Every value is a global sum over the split divided by a
 global count (torchmetrics states, reduced over DDP processes), never a mean of batch
-means. ``loss`` is the model's loss averaged over clips; ``normaliser_fallback`` (2D-input
+means; classification's AUROC and AP, which are not sums, are computed once from every
+clip's score kept over the split (``RankingMetrics``, gathered over processes), so they
+too are the same for any batch size. ``loss`` is the model's loss averaged over clips; ``normaliser_fallback`` (2D-input
 tasks) the share of input frames normalised by their joint bbox. See docs/training.md,
 Metrics.
 """

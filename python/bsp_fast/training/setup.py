@@ -19,7 +19,10 @@ def rank() -> int:  # Lightning's: from the launcher's environment, then the tra
 
 # ---------------------------------------------------------------------- data
 def make_datamodule(cfg: dict, h5=None):
-    """The ``BSPDataModule`` of a config (``h5``: an existing file to use instead)."""
+    """The ``BSPDataModule`` of a config (``h5``: an existing file to use instead), or with
+    ``mix`` a ``MixedDataModule`` (its ``data: true`` source reads that data module)."""
+    if cfg.get("mix") is not None:
+        return _mixed_datamodule(cfg, h5)
     from ..data import BSPDataModule
 
     data = Path(h5 or cfg["data"])
@@ -45,6 +48,31 @@ def make_datamodule(cfg: dict, h5=None):
                          augment=augment, seed=cfg["seed"], sampler_seed=cfg["seed"],
                          convert_options=convert, dataset_options=dataset_options,
                          verbose=not cfg["quiet"] and rank() == 0)
+
+
+def _mixed_datamodule(cfg: dict, h5=None):
+    """A mixed run's data (docs/interop.md, Mixed training): the mix's sources in their
+    shares, tested on ``test_on`` alone when given; the source marked ``data: true``
+    reads ``--data`` converted as a one-file run converts it, at the mix's clip length."""
+    from ..data.mix_tables import plan_mix
+    from ..data.mixed import MixedDataModule
+
+    mix = cfg["mix"]
+    try:
+        plan = plan_mix(mix, cfg.get("mix_data") or {}, cfg["data"], cfg.get("test_on"))
+        base = None
+        if any(s["data"] for s in plan["sources"] + [plan["test"] or {}]):
+            L = cfg["clip_length"] or mix.get("clip_length")
+            base = make_datamodule(dict(cfg, mix=None, clip_length=L), h5)
+        task = get_task(cfg["task"])
+        return MixedDataModule(
+            plan["sources"], cfg["task"], cfg["batch_size"], cfg["workers"],
+            epoch_size=mix.get("epoch_size"), seed=cfg["seed"], noise=cfg["noise"],
+            mjp=cfg["mjp"], augment=cfg["augment"] and task.augments,
+            dataset_options=task.dataset_options(cfg), test_source=plan["test"], base=base,
+            clip_length=mix.get("clip_length"))
+    except ValueError as exc:
+        raise RunError(f"data: {exc}") from None
 
 
 def prepare_data(dm, stages=("fit", "test"), convert: bool = True) -> None:
@@ -144,7 +172,10 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
                                            patience=cfg["early_stop"]))
         from .lifecycle import AtomicCheckpointIO
 
-        return pl.Trainer(devices=cfg["devices"], strategy=cfg["strategy"],
+        # a mix's batch sampler is not distributed: one process (config refuses more)
+        devices = 1 if cfg.get("mix") is not None and cfg["devices"] == "auto" \
+            else cfg["devices"]
+        return pl.Trainer(devices=devices, strategy=cfg["strategy"],
                           plugins=[AtomicCheckpointIO()],
                           num_nodes=cfg.get("num_nodes") or 1,
                           max_epochs=max_epochs or cfg["epochs"],

@@ -131,6 +131,11 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
                                            config=cfg)
     except (ValueError, TypeError, AssertionError, RuntimeError) as exc:
         raise C.ConfigError(f"model {cfg['model']!r}: {exc}") from None
+    if cfg.get("compile") == "on":
+        # the bound method, not the module: checkpoints keep their keys (no "_orig_mod.");
+        # static shapes: a short last batch compiles once more instead of switching every
+        # later step to slower dynamic-shape kernels
+        module.net.compute = torch.compile(module.net.compute, dynamic=False)
     dm = make_datamodule(cfg)
     prepare_data(dm, convert=not child)
     precision, why = _precision(cfg, module, dm)
@@ -256,8 +261,8 @@ def _precision(cfg: dict, module, dm) -> tuple:
 
 def _inputs(cfg: dict, resume, config_path=None) -> list:
     """What a run reads and ``--out`` must never replace: the data (folder, data.csv or
-    HDF5 file), the --config file and the checkpoint it starts from."""
-    return [cfg.get("data"), config_path,
+    HDF5 file), a mix's clip files, the --config file and the checkpoint it starts from."""
+    return [cfg.get("data"), *(cfg.get("mix_data") or {}).values(), config_path,
             resume["ckpt"] if resume is not None and resume["run_dir"] is None else None]
 
 

@@ -42,8 +42,12 @@ struct Recording {
   std::int64_t camera_idx = 0, pedestrian_idx = 0;
   std::vector<std::size_t> rows;  // table rows sorted by frame_idx
   bool crosser = false;           // any row crossing
-  std::int64_t event_frame = -1;  // benchmark mode
+  std::int64_t event_frame = -1;  // benchmark mode: first crossing frame, else last - 3
 };
+
+// Clip::time_to_event of a clip that has no event (not a benchmark window); also the
+// value of the clip file's meta/tte then (docs/hdf5-schema.md).
+constexpr std::int32_t kNoEvent = -1;
 
 struct Clip {
   std::uint32_t recording = 0;  // index into Plan::recordings
@@ -51,6 +55,10 @@ struct Clip {
   std::int32_t segment = 0;     // contiguous segment of the recording (counts from 0)
   std::int32_t index = 0;       // clip counter, restarting in each segment
   std::uint8_t label = 0;       // 1 = crossing
+  // Benchmark mode: frames from the window's last frame to its recording's event
+  // (Recording::event_frame - frame_idx of the last row; 30..61 by SPEC section 4).
+  // kNoEvent outside benchmark mode, where a recording has no event.
+  std::int32_t time_to_event = kNoEvent;
 };
 
 enum SplitId { kTrain = 0, kVal = 1, kTest = 2 };

@@ -1,5 +1,7 @@
 """Crossing vs not crossing from a 2D clip: F1 of the crossing class, precision, recall,
-accuracy (argmax of two logits, or sigmoid >= 0.5 of one)."""
+accuracy (argmax of two logits, or sigmoid >= 0.5 of one), and the PIE/JAAD crossing
+benchmark's threshold-free AUROC and average precision (``ap``) of the model's
+P(crossing), computed exactly over the split (:mod:`bsp_fast.metrics.ranking`)."""
 from __future__ import annotations
 
 from .base import Metric, Task
@@ -27,7 +29,9 @@ class Classification(Task):
     metrics = (Metric("f1", "F1", "fraction", "higher", ".3f"),
                Metric("precision", "precision", "fraction", "higher", ".3f"),
                Metric("recall", "recall", "fraction", "higher", ".3f"),
-               Metric("accuracy", "accuracy", "fraction", "higher", ".3f"))
+               Metric("accuracy", "accuracy", "fraction", "higher", ".3f"),
+               Metric("auroc", "AUROC", "fraction", "higher", ".3f"),
+               Metric("ap", "AP", "fraction", "higher", ".3f"))
     curves = ("f1", "precision", "recall")
     deformed_inputs = True
     augments = True
@@ -37,10 +41,17 @@ class Classification(Task):
     def metric_modules(self) -> dict:
         from ... import metrics as M
 
-        return {"cls": M.ClassificationMetrics()}
+        return {"cls": M.ClassificationMetrics(), "ranking": M.RankingMetrics()}
 
     def update_metrics(self, scores, output, batch, model) -> None:
+        from ...metrics.ranking import crossing_probability
+
         scores["cls"].update(output, batch["label"])
+        meta = batch.get("meta") or {}  # a hand-built batch may have none: -1 for both
+        # every clip's P(crossing) with its time to event (-1: none) and row: AUROC and AP
+        # are not sums, and the per-recording file keeps the clips themselves
+        scores["ranking"].update(crossing_probability(output), batch["label"],
+                                 tte=meta.get("tte"), row=meta.get("row"))
 
     def predictions(self, output, batch, model) -> dict:
         import torch

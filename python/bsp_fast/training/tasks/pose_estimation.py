@@ -42,10 +42,15 @@ class PoseEstimation(Task):
 
     def dataset_options(self, cfg: dict) -> dict:
         """Train-time box jitter (``box_jitter_scale``, ``box_jitter_shift``; default off):
-        the train split's crop boxes perturbed per frame and re-cut from the context crops."""
+        the train split's crop boxes perturbed per frame and re-cut from the context crops;
+        ``image_augment`` (default off): flips, zoom, shift, rotation (``image_rotation``)
+        and colour jitter of the train crops (``data.images.ImageAugment``)."""
         scale = cfg.get("box_jitter_scale", 0.0) or 0.0
         shift = cfg.get("box_jitter_shift", 0.0) or 0.0
-        return {"box_jitter": (float(scale), float(shift))} if scale or shift else {}
+        out = {"box_jitter": (float(scale), float(shift))} if scale or shift else {}
+        if cfg.get("image_augment"):  # the data module keeps it to the train split
+            out.update(augment=True, image_rotation=float(cfg.get("image_rotation", 15.0)))
+        return out
 
     def metric_modules(self) -> dict:
         from ... import metrics as M

@@ -1,0 +1,175 @@
+"""Training speed per model (#36, items 2, 3 and 5): a plain PyTorch loop in eager float32,
+eager bf16 autocast, ``torch.compile`` float32 and bf16, and ``bsp-train`` end to end,
+side by side in one run, each in a fresh process, the same optimiser updates on the same
+batches with validation at the tables' cadence (once per epoch, the whole val split).
+
+    PYTHONPATH=python python3 benchmarks/bench_train_loop.py [--epochs 2]
+        [--models lifting/poseformer ...] [--modes eager32 eager_bf16 compiled32 ...]
+        [--json out.json]
+
+The plain loop is what a user would write: ``ClipDataset`` batches in a seeded random
+order, the model's own loss and ``configure_optimizers`` (AdamW and its scheduler),
+``torch.no_grad`` validation. Per mode the table gives clips/s of the steady state
+(updates after the first two), the first update's seconds (the compile, for compiled
+modes), and the whole process's wall seconds from start to exit (imports included), and
+the validation loss after the last epoch (compiled vs eager: the same updates, so the
+losses must agree within float32 / bf16 rounding). ``bsp-train`` runs with the tables'
+options (``--precision`` as given, one thread, validation every epoch, checkpoints,
+early stopping, CSV logs); its ratio to the plain loop at the same precision is item 3's
+number. ``project_quick_s`` gives a quick-budget run's training seconds per mode:
+first update + the budget's updates x the steady seconds per update.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import sys
+import tempfile
+import time
+
+T0 = time.perf_counter()
+
+#: (task/model, the quick budget's batch size, clip length, the quick budget's updates)
+MODELS = [("classification/lstm", 64, 30, 500), ("classification/pedestrian_graph", 64, 30, 500),
+          ("autoencoder/simple_transformer", 32, 30, 900), ("lifting/baseline_3d", 64, 16, 500),
+          ("lifting/lstm", 64, 16, 500), ("lifting/lstm_relative_rot", 64, 16, 500),
+          ("lifting/poseformer", 16, 16, 500)]
+MODES = ("eager32", "eager_bf16", "compiled32", "compiled_bf16", "bsp_train32",
+         "bsp_train_bf16")
+
+
+def _plain(job) -> dict:
+    """One plain-loop run in this (fresh) process; returns its timings."""
+    name, batch, h5, epochs, mode, t_start, updates = job
+    import torch
+
+    from bsp_fast import models
+    from bsp_fast.data import ClipDataset
+
+    torch.set_num_threads(1)
+    task, model = name.split("/")
+    bf16 = mode.endswith("bf16")
+    train, val = ClipDataset(h5, "train", task), ClipDataset(h5, "val", task)
+    torch.manual_seed(1)
+    net = models.create(task, model)
+    if mode.startswith("compiled"):
+        net.compute = torch.compile(net.compute, dynamic=False)  # as bsp-train --compile on
+    opt = net.configure_optimizers(lr=None)
+    opt = opt["optimizer"] if isinstance(opt, dict) else (opt[0][0] if isinstance(opt, tuple) else opt)
+    g = torch.Generator().manual_seed(1)
+    step_s, val_s, val_loss = [], 0.0, float("nan")
+    for _ in range(epochs):
+        net.train()
+        order = torch.randperm(len(train), generator=g).tolist()
+        for i in range(0, len(order), batch):  # the last batch may be short, as in bsp-train
+            if updates and len(step_s) == updates:
+                break
+            t = time.perf_counter()
+            b = train[order[i:i + batch]]
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+                loss = net.loss(net.forward_batch(b), b)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            step_s.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        net.eval()
+        total, n = 0.0, 0
+        with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            for i in range(0, len(val), batch):
+                b = val[list(range(i, min(i + batch, len(val))))]
+                k = len(b["inputs"])
+                total += float(net.loss(net.forward_batch(b), b)) * k
+                n += k
+        val_loss = total / n
+        val_s += time.perf_counter() - t
+    t = time.perf_counter()  # the test split scored once, as bsp-train does
+    test = ClipDataset(h5, "test", task)
+    with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+        for i in range(0, len(test), batch):
+            b = test[list(range(i, min(i + batch, len(test))))]
+            net.loss(net.forward_batch(b), b)
+    val_s += time.perf_counter() - t
+    steady = step_s[2:] or step_s
+    return {"first_s": step_s[0], "step_s": sum(steady) / len(steady), "updates": len(step_s),
+            "val_s": val_s, "val_loss": val_loss, "clips_per_s": batch / (sum(steady) / len(steady)),
+            "fit_s": sum(step_s) + val_s, "total_s": time.time() - t_start}
+
+
+def _bsp_train(job) -> dict:
+    name, batch, h5, epochs, mode, t_start, updates = job
+    import bsp_fast
+
+    task, model = name.split("/")
+    out = os.path.join(os.path.dirname(h5), f"run-{task}-{model}-{mode}")
+    t = time.perf_counter()
+    res = bsp_fast.train(task, model, data=h5, out=out, epochs=epochs, batch_size=batch,
+                         precision="bf16-mixed" if mode.endswith("bf16") else "32",
+                         threads=1, early_stop=0, seed=1, accelerator="cpu", force=True,
+                         max_steps=updates or 0)
+    fit = time.perf_counter() - t
+    return {"fit_s": fit, "total_s": time.time() - t_start,
+            "val_loss": float(res.val.get("loss", float("nan"))), "seconds": res.seconds}
+
+
+def _run(job):
+    return (_bsp_train if job[4].startswith("bsp_train") else _plain)(job)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--epochs", type=int, default=4)
+    p.add_argument("--train-clips", type=int, default=1024)
+    p.add_argument("--models", nargs="+", default=[m[0] for m in MODELS])
+    p.add_argument("--modes", nargs="+", default=list(MODES), choices=MODES)
+    p.add_argument("--updates", type=int, default=0,
+                   help="optimiser updates per run (0: --epochs whole epochs); with "
+                        "--train-clips 1152 and --updates 500 a run is a quick-budget run")
+    p.add_argument("--json", help="append one JSON line per (model, mode) to this file")
+    args = p.parse_args(argv)
+    from bsp_fast.data.testing import write_clip_file
+    from bsp_fast.models.lstm import cpu_bf16
+
+    flags = sorted({f for line in open("/proc/cpuinfo") if line.startswith("flags")
+                    for f in line.split()[2:] if f in ("avx2", "avx512f", "avx512_bf16", "amx_bf16")})
+    print(f"CPU flags: {' '.join(flags)}; bf16 autocast native: {cpu_bf16()}; "
+          f"load average {os.getloadavg()[0]:.2f}; {args.train_clips} train clips, "
+          f"{args.epochs} epochs, one thread per process", flush=True)
+    if not cpu_bf16():
+        args.modes = [m for m in args.modes if not m.endswith("bf16")]
+    tmp = tempfile.mkdtemp(prefix="bench_train_loop_")
+    ctx = mp.get_context("spawn")
+    print("| model | batch | mode | clips/s (steady) | first update s | fit s | process s | "
+          "val loss | quick-budget train s (projected) |\n|---|---|---|---|---|---|---|---|---|")
+    rows = []
+    for name, batch, length, quick_updates in MODELS:
+        if name not in args.models:
+            continue
+        n = args.train_clips if batch >= 32 else args.train_clips // 2
+        h5 = os.path.join(tmp, f"{name.replace('/', '-')}.h5")
+        write_clip_file(h5, clips=(n, n // 4, n // 4), clip_length=length,
+                        frames_per_recording=8 * length, seed=1, rotations=False)
+        for mode in args.modes:
+            with ctx.Pool(1) as pool:  # a fresh process: imports and start-up counted
+                steps = -(-n // batch)
+                epochs = -(-args.updates // steps) if args.updates else args.epochs
+                r = pool.apply(_run, ((name, batch, h5, epochs, mode, time.time(), args.updates),))
+            r.update(model=name, batch=batch, mode=mode, load=os.getloadavg()[0])
+            if "step_s" in r:
+                r["project_quick_s"] = r["first_s"] + (quick_updates - 1) * r["step_s"]
+            rows.append(r)
+            print(f"| {name} | {batch} | {mode} | {r.get('clips_per_s', float('nan')):,.0f} | "
+                  f"{r.get('first_s', float('nan')):.2f} | {r['fit_s']:.1f} | {r['total_s']:.1f} | "
+                  f"{r['val_loss']:.5f} | {r.get('project_quick_s', float('nan')):.0f} |",
+                  flush=True)
+            if args.json:
+                with open(args.json, "a") as f:
+                    f.write(json.dumps(r) + "\n")
+    print(f"load average {os.getloadavg()[0]:.2f} at the end")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,52 @@
+"""The README's result sections are generated (#37, "tables that cannot drift"): each
+section between its markers is exactly what `python3 -m bsp_fast.reproduction.readme`
+renders from docs/results/*.json and the table files, every report table has one, and no
+typed number about the tables is left outside them."""
+import re
+from pathlib import Path
+
+from bsp_fast import reproduction as R
+from bsp_fast.reproduction import readme as RM
+
+ROOT = Path(__file__).resolve().parents[2]
+README = ROOT / "README.md"
+
+
+def _sections(text: str) -> dict:
+    return {m["key"]: m["body"] for m in RM.MARKER.finditer(text)}
+
+
+def test_every_report_table_has_a_generated_section():
+    keys = list(_sections(README.read_text(encoding="utf-8")))
+    assert sorted(keys) == sorted(R.TABLES), keys
+
+
+def test_readme_sections_are_their_rendering():
+    text = README.read_text(encoding="utf-8")
+    bad = RM.differing_sections(text, ROOT / "docs" / "results", ROOT)
+    assert not bad, ("README sections differ from their rendering: "
+                     + ", ".join(f"results:{k}" for k in bad)
+                     + "; run: python3 -m bsp_fast.reproduction.readme")
+
+
+def test_unpublished_tables_show_no_numbers_and_link_their_history():
+    for key, body in _sections(README.read_text(encoding="utf-8")).items():
+        if (ROOT / "docs" / "results" / f"{key}-quick.json").is_file():
+            continue
+        assert "**Not run under the registered protocol yet**" in body, key
+        shown = body.split("Registered protocol:")[0]  # before the registered settings
+        older = (ROOT / "docs" / "results").glob(f"{key}-quick-*seeds*.md")
+        history = sorted(p.name for p in older)
+        assert history and all(f"docs/results/{h}" in shown for h in history), key
+        assert not re.search(r"\d+\.\d", shown), (key, shown)  # no measured value
+
+
+def test_reproduction_prose_has_no_typed_results():
+    """Outside the generated sections, the README's reproduction chapter states no
+    measured value (a mean, an interval, a difference): those are rendered."""
+    text = README.read_text(encoding="utf-8")
+    start = text.index("## Reproducing the report\n")
+    chapter = text[start:text.index("## Layout and development", start)]
+    prose = RM.MARKER.sub("", chapter)
+    prose = re.sub(r"```.*?```", "", prose, flags=re.S)  # commands
+    assert not re.findall(r"[±\[]\s*[−+-]?\d|\d+\.\d+ ?(?:mm|%|p\.p\.)", prose)
