@@ -32,8 +32,8 @@ import time
 T0 = time.perf_counter()
 
 #: (task/model, the quick budget's batch size, clip length, the quick budget's updates)
-MODELS = [("classification/lstm", 64, 30, 500), ("classification/pedestrian_graph", 64, 30, 500),
-          ("autoencoder/simple_transformer", 32, 30, 900), ("lifting/baseline_3d", 64, 16, 500),
+MODELS = [("classification/lstm", 64, 16, 520), ("classification/pedestrian_graph", 64, 16, 520),
+          ("autoencoder/simple_transformer", 32, 30, 570), ("lifting/baseline_3d", 64, 16, 500),
           ("lifting/lstm", 64, 16, 500), ("lifting/lstm_relative_rot", 64, 16, 500),
           ("lifting/poseformer", 16, 16, 500)]
 MODES = ("eager32", "eager_bf16", "compiled32", "compiled_bf16", "bsp_train32",

@@ -39,3 +39,23 @@ def test_compiled_run_matches_eager(tmp_path):
     cfg = yaml.safe_load((tmp_path / "compiled" / "config.yaml").read_text())
     assert cfg["compile"] == "on"
     assert yaml.safe_load((tmp_path / "eager" / "config.yaml").read_text())["compile"] == "off"
+
+
+def test_bench_train_loop_smoke(capsys, monkeypatch, tmp_path):
+    """benchmarks/bench_train_loop.py on one fast model, the eager plain loop and bsp-train
+    (its worker processes are spawned and import the benchmark by name)."""
+    import importlib
+    import json
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    bench = importlib.import_module("bench_train_loop")
+    out = tmp_path / "rows.jsonl"
+    assert bench.main(["--models", "lifting/lstm", "--train-clips", "64", "--epochs", "1",
+                       "--updates", "3", "--modes", "eager32", "bsp_train32",
+                       "--json", str(out)]) == 0
+    rows = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [r["mode"] for r in rows] == ["eager32", "bsp_train32"]
+    assert rows[0]["updates"] == 3 and rows[0]["clips_per_s"] > 0
+    assert rows[1]["total_s"] >= rows[1]["fit_s"] > 0
+    assert "| lifting/lstm | 64 | eager32 |" in capsys.readouterr().out
