@@ -267,9 +267,9 @@ def test_a_per_clip_metric_is_resampled_from_its_recordings_clips(tmp_path):
                                                 "initial": {}, "per_recording": str(path)}
     E.summarise(tab, res)
     # replicates: 1 (the first recording only), 0 (the second only) or 0.75 (both); the t
-    # interval is symmetric about the value on every clip
+    # interval, symmetric about the value on every clip and wider than 0.5, is cut at 1
     low, high = res["results"]["a"]["interval"]["auroc"]
-    assert (low + high) / 2 == pytest.approx(0.75) and high - low > 0.5
+    assert high == 1.0 and 0.0 <= low < 0.5
     bad = dict(sec, clips=[[[0.9]], []])
     (tmp_path / "clips-0.json").write_text(json.dumps({"test": bad, "empty": {}}))
     with pytest.raises(ValueError, match=r"clips-0.json: recording 'v/0': each clip must be "
@@ -353,3 +353,13 @@ def test_two_cells_and_two_marks_recomputed_independently(tmp_path):
             assert float(printed[1]) == pytest.approx(holm[praw], abs=0.01 + 0.1 * holm[praw])
         marks.append(want)
     assert marks == ["reproduced", "inconclusive"]  # 10 mm apart is decided, 0.5 mm is not
+
+
+def test_cell_intervals_stay_inside_what_the_metric_can_take():
+    from bsp_fast.reproduction.evidence import _in_support
+
+    assert _in_support("f1", [0.861, 1.040]) == [0.861, 1.0]
+    assert _in_support("pck_0.05", [-0.13, 0.6]) == [0.0, 0.6]
+    assert _in_support("mpjpe_mm", [-3.0, 12.0]) == [0.0, 12.0]
+    assert _in_support("mpjve_mm", [-1.0, 2.0]) == [0.0, 2.0]  # mm per frame
+    assert _in_support("loss", [-1.0, 2.0]) == [-1.0, 2.0]  # no stated bound

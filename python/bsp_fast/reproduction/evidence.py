@@ -16,6 +16,7 @@ baseline, ``initial_of``) are the same runs and share the draw.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -178,6 +179,18 @@ def _bounds(iv) -> list | None:
         else None
 
 
+def _in_support(metric: str, bounds: list) -> list:
+    """A cell's interval cut to the values its metric can take (fractions in [0, 1],
+    errors in mm at least 0): the symmetric t interval of a mean near a bound reaches past
+    it (F1 0.95 [0.86, 1.04]); cutting changes no mark, which are decided on differences."""
+    from ..training.scoring import UNITS
+
+    unit = UNITS.get(metric, "")
+    lo, hi = {"fraction": (0.0, 1.0)}.get(unit, (0.0, math.inf) if unit.startswith("mm")
+                                           else (-math.inf, math.inf))
+    return [min(max(bounds[0], lo), hi), min(max(bounds[1], lo), hi)]
+
+
 def summarise(tab: dict, res: dict) -> dict:
     """Adds to each row of ``res["results"]`` (from :func:`.runner.run_table` with seeds):
     ``metrics`` and ``initial`` (means over seeds), ``std`` (sample std over seeds, None
@@ -197,7 +210,7 @@ def summarise(tab: dict, res: dict) -> dict:
             for key, levels in (("interval", "both"), ("interval_seeds", "seeds")):
                 b = _bounds(_test(data, lambda v: v[0], levels) if data else None)
                 if b is not None:
-                    r[key][m] = b
+                    r[key][m] = _in_support(m, b)
             init = [s["initial"].get(m) for s in r["seeds"].values()
                     if s["initial"].get(m) is not None]
             r["initial"][m] = float(np.mean(init)) if init else None
