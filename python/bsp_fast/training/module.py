@@ -69,6 +69,14 @@ class TaskModule(pl.LightningModule):
     def forward(self, batch: dict) -> torch.Tensor:
         return self.net.forward_batch(batch)
 
+    def transfer_batch_to_device(self, batch, device, dataloader_idx: int):
+        # our loaders give CPU tensors: on a CPU run there is nothing to move, and Lightning's
+        # generic walk over the batch (every string of its meta lists) cost ~12 % of a
+        # small model's training time (benchmarks/bench_train_loop.py, docs/performance.md)
+        if device.type == "cpu":
+            return batch
+        return super().transfer_batch_to_device(batch, device, dataloader_idx)
+
     def scored_frames(self, L: int) -> slice:
         """The frames of an ``L``-frame clip that are scored and predicted."""
         return self.spec.scored_frames(self.net, L)

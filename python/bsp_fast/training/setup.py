@@ -136,6 +136,8 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
     # resuming mid-epoch: Lifecycle makes our sampler skip the batches already trained on
     warnings.filterwarnings("ignore", message=r".*resuming from a checkpoint that ended before "
                             r"the epoch ended.*")
+    # TaskModule.transfer_batch_to_device (no walk over CPU batches) is meant to win
+    warnings.filterwarnings("ignore", message=r".*overridden `transfer_batch_to_device`.*")
     # an epoch without validation (--max-steps within the first epoch): bsp-train says so
     warnings.filterwarnings("ignore", message=r".*could not find the monitored key.*")
     for name in ("lightning.pytorch", "lightning.fabric"):  # device banners and tips
