@@ -363,3 +363,26 @@ def test_cell_intervals_stay_inside_what_the_metric_can_take():
     assert _in_support("mpjpe_mm", [-3.0, 12.0]) == [0.0, 12.0]
     assert _in_support("mpjve_mm", [-1.0, 2.0]) == [0.0, 2.0]  # mm per frame
     assert _in_support("loss", [-1.0, 2.0]) == [-1.0, 2.0]  # no stated bound
+
+
+def test_the_seed_rule_binds_each_comparison_of_an_ordering(tmp_path):
+    """An ordering with one row under-seeded (PoseFormer, 3 of 5 seeds): a comparison of
+    two rows with all their seeds that goes decisively the wrong way makes the finding not
+    reproduced; where every comparison names the under-seeded row, it stays inconclusive
+    by rule."""
+    base = _base()
+
+    def order(rows):
+        tab = _lifting([{"kind": "order", "metric": "mpjpe_mm", "rows": rows, "text": "o"}])
+        res = _write(tmp_path, tab, {"poseformer": base - 30, "lstm": base + 30,
+                                     "baseline_3d": base})
+        for s in ("3", "4"):
+            del res["results"]["poseformer"]["seeds"][s]
+        return E.evaluate_findings(tab, E.summarise(tab, res))[0]
+
+    f = order(["poseformer", "lstm", "baseline_3d"])  # lstm < baseline_3d is false
+    assert f["status"] == "not reproduced" and f["rule"] is None
+    assert "(inconclusive by rule)" in f["ours"] and "(not reproduced)" in f["ours"]
+    f = order(["lstm", "poseformer", "baseline_3d"])  # both comparisons name PoseFormer
+    assert f["status"] == "inconclusive"
+    assert f["rule"] == "fewer than 5 seeds (poseformer: 3)"

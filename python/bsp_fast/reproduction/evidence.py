@@ -296,8 +296,11 @@ def _compute(tab, f, sums: _Sums, have) -> dict:
                 data["rows"][i], data["rows"][j], sign,
                 groups=[data["groups"][i], data["groups"][j]],
                 seed_keys=[data["keys"][i], data["keys"][j]])
+        # the rules bind each comparison by its own rows: an ordering with one under-seeded
+        # row is still not reproduced when a comparison of other rows goes against it
         out.append({"label": label, "side": side, "test": _test(data, fn),
-                    "seeds_only": _test(data, fn, "seeds"), "poi": poi})
+                    "seeds_only": _test(data, fn, "seeds"), "poi": poi,
+                    "rule": U.rule(data["seeds"], data["recordings"])})
     return {"pieces": out, "rule": U.rule(seeds, min(recordings)), "seeds": seeds}
 
 
@@ -313,14 +316,17 @@ def _finding(tab, f, c: dict) -> dict:
     pieces, texts, marks = c["pieces"], [], []
     for q in pieces:
         t, s = q["test"], q["seeds_only"]
-        marks.append(U.decide(t.value, q["p_holm"], q["side"]))
+        marks.append(U.UNSURE if q["rule"] else U.decide(t.value, q["p_holm"], q["side"]))
         text = (f"{q['label']} {_num(tab, m, t.value)}{pp} [{_num(tab, m, t.low)}, "
                 f"{_num(tab, m, t.high)}] (seeds only [{_num(tab, m, s.low)}, "
                 f"{_num(tab, m, s.high)}])")
-        texts.append(text + (f" ({marks[-1]})" if len(pieces) > 1 else ""))
-    status = U.UNSURE if c["rule"] else U.combine_marks(marks)
+        texts.append(text + (f" ({marks[-1]}{' by rule' if q['rule'] else ''})"
+                             if len(pieces) > 1 else ""))
+    status = U.combine_marks(marks)
     first = pieces[0]["test"]
-    out = {"status": status, "rule": c["rule"], "seeds": c["seeds"],
+    # the rule is printed where it decided the mark (a finding left inconclusive)
+    out = {"status": status, "rule": c["rule"] if status == U.UNSURE else None,
+           "seeds": c["seeds"],
            "difference": first.value, "interval": [first.low, first.high],
            "interval_seeds": [pieces[0]["seeds_only"].low, pieces[0]["seeds_only"].high],
            "recordings": first.n, "p": [q["test"].p for q in pieces],
@@ -330,7 +336,7 @@ def _finding(tab, f, c: dict) -> dict:
                              for q in pieces]}
     if f["kind"] == "drop" and f.get("report") is not None:
         margin = _margin(tab, f)
-        verdict = None if c["rule"] else U.equivalence(first, f["report"], margin)
+        verdict = None if pieces[0]["rule"] else U.equivalence(first, f["report"], margin)
         size = f"{format_value(tab, m, f['report'])}{pp} ± {format_value(tab, m, margin)}"
         texts.append({U.AGREES: f"size agrees with the report's {size} (interval inside)",
                       U.DIFFERS: f"size differs from the report's {size} (interval outside)",
