@@ -53,9 +53,12 @@ def run_plateau(run_dir: Path, tail: float) -> dict:
     best = min(val.values())
     gain = (min(before) - best) / abs(min(before)) if before else float("nan")
     cap = int(cfg.get("max_steps") or 0)
-    stopped_early = bool(cap) and last_step < cap and epochs[-1] + 1 < int(cfg["epochs"])
+    # the updates made (logged at each epoch's end; a run capped by max_steps inside an
+    # epoch made its last updates after its last validation)
+    made = int(max(logs.get("cost/updates", {}).values(), default=last_step))
+    stopped_early = bool(cap) and made < cap and epochs[-1] + 1 < int(cfg["epochs"])
     return {"run": str(run_dir), "best_epoch": min(val, key=val.get) + 1,
-            "epochs": epochs[-1] + 1, "updates": last_step, "cap": cap,
+            "epochs": epochs[-1] + 1, "updates": max(made, last_step), "cap": cap,
             "gain_in_tail": gain, "stopped_early": stopped_early}
 
 

@@ -146,7 +146,7 @@ def test_deviations_and_exploratory_fields_load(tmp_path):
 
 
 RECORDED = {"autoencoder": ["38006fb", "0904e51"], "classification": ["0904e51", "f2d3e8e"],
-            "lifting": ["0904e51", "f2d3e8e"], "pose_estimation": ["0904e51", "f053164"]}
+            "lifting": ["0904e51", "f2d3e8e", "2363a0b"], "pose_estimation": ["0904e51", "f053164"]}
 
 
 @pytest.mark.parametrize("table", R.TABLES)
@@ -358,6 +358,7 @@ def test_max_seeds_caps_a_costly_row_and_needs_its_reason(tmp_path):
     from bsp_fast.reproduction.runner import row_seeds
 
     doc = yaml.safe_load((ROOT / "experiments" / "lifting.yaml").read_text())
+    doc["rows"][0].update(max_seeds={"quick": 3}, max_seeds_why="33 CPU min per seed")
     tab = R.load_table(_write(tmp_path / "capped.yaml", doc))
     got = {r["name"]: row_seeds(r, [7, 8, 9, 10, 11], "quick") for r in tab["rows"]}
     assert got["poseformer"] == [7, 8, 9] and got["lstm"] == [7, 8, 9, 10, 11]
