@@ -108,7 +108,7 @@ TEST_CASE("plan_clips: label_fraction looks at the last ceil(L * F) frames") {
         std::vector<ClipKey>{{0, 0, 0, 0, 1}, {0, 3, 0, 1, 0}});
 }
 
-TEST_CASE("plan_clips: benchmark windows carry their time to event (SPEC section 4)") {
+TEST_CASE("plan_clips: benchmark windows carry their time to event (docs/hdf5-schema.md)") {
   // A crosses from frame 100 (event 100): frames 36..70 kept, windows every 6 from 36.
   // B never crosses (event 99 - 3 = 96, frames 32..66 kept) and lacks frame 50: windows
   // start at 32, 38, 44 in 32..49 and at 51, 57, 63 in 51..66.

@@ -71,7 +71,7 @@ def test_stored_time_to_event_by_hand(converted):
         for v, end, tte in zip(d["video"], d["end"], d["tte"]):
             k = int(v.split("/")[1][:8], 16)
             # a crosser's event is its first crossing frame, 90; a non-crosser's the last
-            # frame - 3 = 96 (SPEC section 4); the window's last frame is end_frame - 1
+            # frame - 3 = 96 (docs/hdf5-schema.md, Time to event); the window's last frame is end_frame - 1
             event = 90 if CROSSERS[k] else 96
             assert tte == event - (end - 1)
             seen.setdefault(k, {})[int(end) - 16] = int(tte)

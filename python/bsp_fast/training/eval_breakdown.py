@@ -53,8 +53,8 @@ DISTANCE_EDGES_M = (0.0, 10.0, 20.0, 30.0, 50.0, math.inf)
 #: inclusive ranges of missing joints per frame
 MISSING_BINS = ((0, 0), (1, 2), (3, 5), (6, 10), (11, 18), (19, 25), (26, 26))
 PCK_ALPHA = 0.05
-#: inclusive ranges of frames to the event; the converter's windows reach 61 frames (SPEC
-#: section 4 keeps frames from event - L - 60, so the earliest window ends at event - 61)
+#: inclusive ranges of frames to the event; the converter's windows reach 61 frames (it keeps
+#: frames from event - L - 60, so the earliest window ends at event - 61: docs/hdf5-schema.md)
 TTE_BINS = ((30, 39), (40, 49), (50, 61))
 #: classification's summary and time-to-event columns
 CLS_COLUMNS = {"f1": "F1", "precision": "precision", "recall": "recall",
