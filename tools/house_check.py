@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""The house rules that a grep or a parse can check (docs/architecture.md, "House rules"):
+"""The house rules that a grep or a parse can check (docs/architecture.md, "What each stage
+guarantees", "House rules a parse can check"):
 
 * no import cycle between modules of ``python/bsp_fast`` (imports inside functions count:
   a lazy import only hides a cycle);

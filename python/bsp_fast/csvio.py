@@ -1,4 +1,5 @@
-"""Read and write CARLA-BSP ``data.csv`` files (SPEC section 1) with the C++ core.
+"""Read and write CARLA-BSP ``data.csv`` files (docs/dataset-format.md, "2. data.csv") with
+the C++ core.
 
 ``read_csv`` memory-maps the file and parses it in parallel into numpy arrays; ``write_csv``
 writes exactly the bytes pandas ``DataFrame.to_csv(index=False)`` wrote for the original

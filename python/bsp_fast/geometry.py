@@ -1,7 +1,8 @@
 """Rigid transforms, forward kinematics and camera projection (CARLA convention).
 
 Transforms are ``(..., 6)`` arrays ``[x, y, z, pitch, yaw, roll]`` in metres and degrees;
-a transform maps p to R p + t with R = Rz(yaw) Ry(-pitch) Rx(-roll) (SPEC section 3).
+a transform maps p to R p + t with R = Rz(yaw) Ry(-pitch) Rx(-roll) (docs/dataset-format.md,
+"5. Geometry conventions").
 Every function accepts any leading batch dimensions (NumPy broadcasting between operands),
 computes in float64 in the C++ core with the GIL released, and returns float64 arrays.
 """
@@ -165,7 +166,8 @@ def in_frame(uv, width, height) -> np.ndarray:
     """The recorder's loose ``in_frame`` flag of ``(..., J, 2)`` pixel poses -> ``(...)``.
 
     True when all joints are finite and any u >= 0, any v >= 0, any u <= W, any v <= H
-    (four independent tests, SPEC section 3). It is a weak "partly visible" flag.
+    (four independent tests, docs/dataset-format.md, "5. Geometry conventions"). It is a
+    weak "partly visible" flag.
     """
     return _core.in_frame(_real(uv, "uv", (-1, 2), "(..., J, 2)", min_ndim=2),
                           float(width), float(height))

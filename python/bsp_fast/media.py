@@ -1,7 +1,8 @@
 """MP4 (H.264) and segmentation APNG: writers for the dataset generator, readers for loaders.
 
 The pixel index of a segmentation APNG is the CARLA 0.9.13 semantic tag; the palette holds
-the Cityscapes colours (SPEC section 1), so viewers show colours while readers get tags.
+the Cityscapes colours (docs/dataset-format.md, "3. Media"), so viewers show colours while
+readers get tags.
 """
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""The 26-joint CARLA pedestrian skeleton and its reference T-poses (SPEC section 2).
+"""The 26-joint CARLA pedestrian skeleton and its reference T-poses (docs/dataset-format.md,
+"4. The 26-joint skeleton").
 
 Reference poses are loaded from the package data (``resources/carla_skeleton/*.yaml``), which
 store locations in centimetres; :func:`reference_pose` returns metres and degrees.

@@ -1,8 +1,8 @@
 """Small, consistent CARLA-BSP data.csv files written independently of the core's writer.
 
-Poses follow the dataset's relations (SPEC section 3): component = M ∘ FK(relative),
-world = walker ∘ component, pose.camera = projection of world. Cells are formatted the way
-pandas wrote the original (Python str() of float lists).
+Poses follow the dataset's relations (docs/dataset-format.md, "5. Geometry conventions"):
+component = M ∘ FK(relative), world = walker ∘ component, pose.camera = projection of world.
+Cells are formatted the way pandas wrote the original (Python str() of float lists).
 """
 from __future__ import annotations
 
@@ -13,8 +13,9 @@ import numpy as np
 import bsp_fast as bf
 from bsp_fast import skeleton as sk
 
-# The 24 columns in the original writer's order (SPEC section 1), written out independently
-# of the core so tests compare against the spec, not against the code under test.
+# The 24 columns in the original writer's order (docs/dataset-format.md, "2. data.csv"),
+# written out independently of the core so tests compare against the spec, not against the
+# code under test.
 COLUMNS = [
     "id", "world.map", "camera.idx", "camera.transform", "camera.width", "camera.height",
     "pedestrian.idx", "pedestrian.model", "pedestrian.age", "pedestrian.gender",

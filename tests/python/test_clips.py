@@ -1,4 +1,5 @@
-"""Clip planning (SPEC section 4) against counts and splits worked out by hand."""
+"""Clip planning (docs/dataset-format.md, "7. From rows to clips and splits") against counts
+and splits worked out by hand."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,5 @@
-"""bsp_fast.read_csv / write_csv against hand-written CSVs and pandas (SPEC section 1)."""
+"""bsp_fast.read_csv / write_csv against hand-written CSVs and pandas (docs/dataset-format.md,
+"2. data.csv")."""
 from __future__ import annotations
 
 import ast

@@ -18,7 +18,8 @@ def np_rot(pyr):
 
 
 def elementary(pyr):
-    """Rz(yaw) Ry(-pitch) Rx(-roll) from right-handed elementary matrices (SPEC section 3)."""
+    """Rz(yaw) Ry(-pitch) Rx(-roll) from right-handed elementary matrices
+    (docs/dataset-format.md, "5. Geometry conventions")."""
     p, y, r = np.deg2rad(pyr)
     Rz = np.array([[np.cos(y), -np.sin(y), 0], [np.sin(y), np.cos(y), 0], [0, 0, 1]])
     Ry = np.array([[np.cos(-p), 0, np.sin(-p)], [0, 1, 0], [-np.sin(-p), 0, np.cos(-p)]])

@@ -1,4 +1,6 @@
-"""bsp-synth end to end: a small generated dataset checked against SPEC section 1 and 3."""
+"""bsp-synth end to end: a small generated dataset checked against docs/dataset-format.md,
+"1. Files on disk" to "3. Media", "5. Geometry conventions" and
+"6. How the recorder placed cameras and walkers"."""
 from __future__ import annotations
 
 import ast
@@ -23,7 +25,7 @@ pd = pytest.importorskip("pandas")
 av = pytest.importorskip("av")
 Image = pytest.importorskip("PIL.Image")
 
-SPEC_COLUMNS = tuple(SPEC_COLUMN_LIST)  # the writer order of SPEC section 1
+SPEC_COLUMNS = tuple(SPEC_COLUMN_LIST)  # the writer order of docs/dataset-format.md, "2. data.csv"
 OPTS = dict(clips=3, frames=150, size="320x128", seed=27)  # adults, children, crossings, gaps
 
 

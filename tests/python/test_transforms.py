@@ -1,4 +1,4 @@
-"""Transforms of SPEC section 5 on hand-made poses."""
+"""Transforms of docs/dataset-format.md, "8. What the loaders compute" on hand-made poses."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,5 @@
-// The clip planner on its own (SPEC section 4), for tests and in-memory re-splitting.
+// The clip planner on its own (docs/dataset-format.md,
+// "7. From rows to clips and splits"), for tests and in-memory re-splitting.
 #include "bsp/clips/clips.hpp"
 #include "common.hpp"
 #include "options.hpp"
@@ -67,5 +68,6 @@ BSP_BINDING(clips) {
   m.def("plan_clips", &plan, py::arg("id_code"), py::arg("camera_idx"), py::arg("pedestrian_idx"),
         py::arg("frame_idx"), py::arg("is_crossing"), py::arg("pose_camera"), py::arg("width"),
         py::arg("height"),
-        "Recordings, segments, clips, labels and the seeded split (SPEC section 4) from row keys.");
+        "Recordings, segments, clips, labels and the seeded split (docs/dataset-format.md, "
+        "\"7. From rows to clips and splits\") from row keys.");
 }

@@ -159,9 +159,9 @@ std::vector<Clip> slice(const RowKeys& k, const Recording& rec, std::uint32_t re
   return out;
 }
 
-// SPEC section 4: fill train, val, test in turn with the next unit that fits what each
-// still needs; an empty set takes the next unit anyway; when no set can take one, the rest
-// goes to train.
+// docs/dataset-format.md, "7. From rows to clips and splits": fill train, val, test in
+// turn with the next unit that fits what each still needs; an empty set takes the next unit
+// anyway; when no set can take one, the rest goes to train.
 std::vector<int> assign_units(const std::vector<std::size_t>& counts, const ClipOptions& o) {
   const std::size_t n_units = counts.size();
   std::vector<std::size_t> order(n_units);

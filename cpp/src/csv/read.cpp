@@ -1,6 +1,6 @@
 // data.csv reader: pread in parallel byte ranges (line index and CRC-32 in one scan), header,
-// then parallel row parsing straight into the preallocated columns of a PoseTable (SPEC
-// section 1).
+// then parallel row parsing straight into the preallocated columns of a PoseTable
+// (docs/dataset-format.md, "2. data.csv").
 #include <fcntl.h>
 #include <libdeflate.h>
 #include <sys/stat.h>

@@ -1,12 +1,13 @@
-"""Pose operations of SPEC section 5 as pure functions: visibility, joint bounding boxes,
-hips-neck normalisation (2D and 3D), horizontal flips and rotations.
+"""Pose operations of docs/dataset-format.md, "8. What the loaders compute" as pure
+functions: visibility, joint bounding boxes, hips-neck normalisation (2D and 3D), horizontal
+flips and rotations.
 
 They work on NumPy arrays (torch tensors are accepted and returned as tensors) of poses
 ``(..., J, 2)`` in pixels, vectorised over any leading dimensions. A **missing** joint is
-exactly ``(0, 0)`` in pixel space (SPEC section 5); the operations leave missing joints at
-``(0, 0)`` and bounding boxes ignore them. The callable, random versions that the datasets
-compose live in :mod:`bsp_fast.data.transforms` (like torchvision's ``transforms`` and
-``transforms.functional``).
+exactly ``(0, 0)`` in pixel space (docs/dataset-format.md, "8. What the loaders compute");
+the operations leave missing joints at ``(0, 0)`` and bounding boxes ignore them. The
+callable, random versions that the datasets compose live in :mod:`bsp_fast.data.transforms`
+(like torchvision's ``transforms`` and ``transforms.functional``).
 """
 from __future__ import annotations
 
@@ -131,7 +132,8 @@ class NormalizedPose:
 
 
 def normalize_hips_neck(points, visible=None) -> NormalizedPose:
-    """Per-frame hips-neck normalisation ``(p - hips) / ||neck - hips||`` (SPEC section 5).
+    """Per-frame hips-neck normalisation ``(p - hips) / ||neck - hips||``
+    (docs/dataset-format.md, "8. What the loaders compute").
 
     When hips or neck is missing (or they coincide) the frame falls back to its joint
     bounding box (visible joints only): shift = bbox centre + (0, -0.1059 s_b), scale =
@@ -257,7 +259,8 @@ def rotate(points, degrees, centre=None):
 
 def flip_rotate(points, flip, degrees, width):
     """``rotate(flip_horizontal(points, width) if flip else points, degrees)`` per clip, in
-    one affine pass (the training augmentation of SPEC section 5).
+    one affine pass (the training augmentation of docs/dataset-format.md,
+    "8. What the loaders compute").
 
     ``flip`` (bool), ``degrees`` and ``width`` are per clip (shape of the clip axes, i.e.
     ``points.shape[:-3]``); the rotation centre is the joint bbox centre of the (flipped)

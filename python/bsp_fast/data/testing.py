@@ -59,7 +59,8 @@ def _loc_rot(t6: np.ndarray) -> tuple:
 
 
 def _inside(uv: np.ndarray) -> np.ndarray:
-    """Per frame: every joint finite and inside the image (SPEC section 4)."""
+    """Per frame: every joint finite and inside the image (docs/dataset-format.md,
+    "7. From rows to clips and splits")."""
     u, v = uv[..., 0], uv[..., 1]
     return np.all(np.isfinite(uv).all(-1) & (u >= 0) & (u <= _W) & (v >= 0) & (v <= _H), -1)
 

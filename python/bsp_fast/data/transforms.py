@@ -1,4 +1,5 @@
-"""Pose transforms of SPEC section 5: normalisation, deformation and augmentation.
+"""Pose transforms of docs/dataset-format.md, "8. What the loaders compute": normalisation,
+deformation and augmentation.
 
 Every transform is a small callable over NumPy arrays (torch tensors are accepted and
 returned as tensors) of 2D poses ``(..., J, 2)`` in pixels, vectorised over any leading
@@ -9,8 +10,9 @@ call (normalisation, flips, rotations, bounding boxes) live in
 
 Conventions:
 
-* A **missing** joint is exactly ``(0, 0)`` in pixel space (SPEC section 5); transforms
-  leave missing joints at ``(0, 0)`` and bounding boxes ignore them.
+* A **missing** joint is exactly ``(0, 0)`` in pixel space (docs/dataset-format.md,
+  "8. What the loaders compute"); transforms leave missing joints at ``(0, 0)`` and
+  bounding boxes ignore them.
 * Random transforms take ``rng`` (a :class:`numpy.random.Generator`, a fresh unseeded one
   when ``None``; the datasets pass a :class:`~bsp_fast.data.clip_random.ClipRandom`, one
   stream per clip of the batch) and draw one decision per **clip**: the clip axes are all dimensions
@@ -175,7 +177,8 @@ class Compose:
 
 
 class Deform(Compose):
-    """Input deformation of SPEC section 5: Gaussian noise, then missing joints.
+    """Input deformation of docs/dataset-format.md, "8. What the loaders compute": Gaussian
+    noise, then missing joints.
 
     Same draws and result as ``Compose([GaussianNoise(sigma), MissingJoints(p)])``, with
     one masking pass instead of two.
@@ -262,7 +265,7 @@ class RandomFlipRotate:
 
 class RandomRotation:
     """Rotates each clip by an angle uniform in ``[-degrees, degrees]`` about its joint
-    bbox centre (SPEC section 5: +-10 degrees)."""
+    bbox centre (docs/dataset-format.md, "8. What the loaders compute": +-10 degrees)."""
 
     def __init__(self, degrees: float = 10.0):
         if not (np.isfinite(degrees) and degrees >= 0):

@@ -1,8 +1,9 @@
 """Drawing primitives of bsp-preview (OpenCV on RGB uint8 arrays).
 
 Images are (H, W, 3) uint8 **RGB** throughout; only the PNG writer converts to BGR.
-Joint (u, v) in pixels (origin at the top-left corner of the image, SPEC section 3: pixel
-column j covers u in [j, j + 1)) is drawn centred on pixel (floor(u), floor(v)).
+Joint (u, v) in pixels (origin at the top-left corner of the image, pixel column j covers u
+in [j, j + 1); docs/preview.md, "bsp-preview: look at the data") is drawn centred on pixel
+(floor(u), floor(v)).
 """
 from __future__ import annotations
 

@@ -7,7 +7,8 @@ import numpy as np
 from .. import skeleton as sk
 
 J = sk.JOINT_INDEX
-ADULT_TORSO = 0.467  # hips-neck distance of the adult models (SPEC section 2)
+# hips-neck distance of the adult models (docs/dataset-format.md, "4. The 26-joint skeleton")
+ADULT_TORSO = 0.467
 
 SKIN = np.array([[255, 219, 172], [241, 194, 125], [224, 172, 105], [198, 134, 66],
                  [141, 85, 36], [92, 56, 30]], float)

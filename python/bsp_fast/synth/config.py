@@ -22,8 +22,9 @@ GENDERS = ("female", "male")
 class Profile:
     """A pedestrian profile: (age, gender) and N(mean, std) speeds in m/s.
 
-    The recorder drew every clip's constant target speed from ``crossing_speed`` (SPEC
-    section 3); ``walking_speed`` is kept because the original configs carry it.
+    The recorder drew every clip's constant target speed from ``crossing_speed``
+    (docs/dataset-format.md, "6. How the recorder placed cameras and walkers");
+    ``walking_speed`` is kept because the original configs carry it.
     """
 
     age: str
@@ -39,7 +40,8 @@ class Profile:
         return [self.age, self.gender, list(self.walking_speed), list(self.crossing_speed)]
 
 
-# The original generator's ExamplePedestrianProfiles (SPEC section 3 for the speeds used).
+# The original generator's ExamplePedestrianProfiles (docs/dataset-format.md,
+# "6. How the recorder placed cameras and walkers" for the speeds used).
 DEFAULT_PROFILES = {
     "adult_female": Profile("adult", "female", (1.19, 0.19), (1.45, 0.23)),
     "adult_male": Profile("adult", "male", (1.27, 0.21), (1.47, 0.24)),
@@ -58,7 +60,7 @@ PRESETS = {
     # time-to-event windows and ~900 default clips (docs/synth.md).
     "medium": dict(number_of_clips=160, clip_length_in_frames=300,
                    camera_image_size=(1600, 600)),
-    # The published CARLA-BSP shape (SPEC section 1).
+    # The published CARLA-BSP shape (docs/dataset-format.md, "2. data.csv").
     "full": dict(number_of_clips=396, clip_length_in_frames=900, camera_image_size=(1600, 600)),
 }
 

@@ -1,8 +1,8 @@
 """A procedural walking gait on the CARLA skeleton (relative pose per frame).
 
 Bones keep their T-pose translations (fixed lengths) and are rotated about BODY axes of
-the mesh space (x = body left, y = forward, z = up; SPEC section 2 reference poses). Each
-bone j gets a global delta D_j, so its posed component rotation is G_j = D_j G0_j and its
+the mesh space (x = body left, y = forward, z = up; docs/synth.md, "Poses"). Each bone j
+gets a global delta D_j, so its posed component rotation is G_j = D_j G0_j and its
 relative rotation rel_j = G_parent^T G_j (a bone whose delta equals its parent's keeps its
 T-pose relative rotation). The hips joint is then shifted vertically each frame so the
 lowest contact point (heels, toes) stays on the ground.
@@ -20,8 +20,9 @@ from .. import skeleton as sk
 from ..geometry import forward_kinematics, rotation_matrix, rotation_to_euler
 
 J = sk.JOINT_INDEX
-# Standing height (m) of each reference model (SPEC section 2) and the walker capsule
-# half-height h derived from it (0.92 m for the adults).
+# Standing height (m) of each reference model (docs/dataset-format.md,
+# "4. The 26-joint skeleton") and the walker capsule half-height h derived from it (0.92 m
+# for the adults).
 BODY_HEIGHT = {"sk_female": 1.69, "sk_male": 1.69, "sk_girl": 1.02, "sk_kid": 1.13}
 ADULT_H = 0.92
 

@@ -19,7 +19,7 @@ from ..geometry import rotation_matrix
 CURB = 0.15  # height of curb, sidewalk and verge (m)
 STREET_HALF_LENGTH = 220.0  # buildings and sidewalks cover s in [-L, L]
 
-# CARLA 0.9.13 semantic tags (SPEC section 1).
+# CARLA 0.9.13 semantic tags (docs/dataset-format.md, "3. Media").
 TAG = dict(building=1, fence=2, other=3, pedestrian=4, pole=5, road_line=6, road=7,
            sidewalk=8, vegetation=9, vehicle=10, wall=11, traffic_sign=12, sky=13,
            ground=14, static=19, dynamic=20, terrain=22)
@@ -327,7 +327,7 @@ def scene_tables(rng, st: Street, path_sw: np.ndarray, cam_sw) -> SceneTables:
 
 
 # ---------------------------------------------------------------------------------------
-# Camera (SPEC section 3: the recorder's placement)
+# Camera (docs/dataset-format.md, "6. How the recorder placed cameras and walkers")
 
 def look_at_camera(look_at: np.ndarray, lane_heading: float, offset: np.ndarray) -> np.ndarray:
     """Camera transform [x, y, z, pitch, yaw, roll] at look_at + R(lane heading) * offset,

@@ -1,6 +1,6 @@
 """The pedestrian's path: spawn on a sidewalk, the recorder's look-at point on the nearest
-driving lane, then a constant-speed walk (SPEC section 3, "Camera placement" and
-"Pedestrian profiles").
+driving lane, then a constant-speed walk (docs/dataset-format.md,
+"6. How the recorder placed cameras and walkers").
 
 Crossing clips walk to the look-at point and keep going; the others walk up to
 ``parallel_max_distance`` metres parallel to the lane and keep going. A waypoint counts as

@@ -1,7 +1,7 @@
-// From rows to clips (SPEC section 4): recordings, contiguous segments, windows, the
-// in-image filter, labels, the benchmark's time-to-event windows, the seeded split by
-// recording and optional train class balancing. Pure bookkeeping on row indices: no pose
-// data is copied here.
+// From rows to clips (docs/dataset-format.md, "7. From rows to clips and splits"):
+// recordings, contiguous segments, windows, the in-image filter, labels, the benchmark's
+// time-to-event windows, the seeded split by recording and optional train class balancing.
+// Pure bookkeeping on row indices: no pose data is copied here.
 #pragma once
 #include <array>
 #include <cstddef>
@@ -56,7 +56,8 @@ struct Clip {
   std::int32_t index = 0;       // clip counter, restarting in each segment
   std::uint8_t label = 0;       // 1 = crossing
   // Benchmark mode: frames from the window's last frame to its recording's event
-  // (Recording::event_frame - frame_idx of the last row; 30..61 by SPEC section 4).
+  // (Recording::event_frame - frame_idx of the last row; 30..61 by docs/hdf5-schema.md,
+  // "Per split").
   // kNoEvent outside benchmark mode, where a recording has no event.
   std::int32_t time_to_event = kNoEvent;
 };

@@ -1,4 +1,5 @@
-// bsp-convert: data.csv -> train/val/test clips in one HDF5 file (SPEC sections 3 and 4).
+// bsp-convert: data.csv -> train/val/test clips in one HDF5 file (docs/dataset-format.md,
+// "5. Geometry conventions" and "7. From rows to clips and splits").
 #pragma once
 #include <array>
 #include <atomic>
@@ -149,7 +150,7 @@ struct ConvertReport {
 ConvertReport convert_csv(const std::string& csv_path, const std::string& out_path,
                           const ConvertOptions& opt, ConvertProgress* progress = nullptr);
 
-// ---- Pedestrian crops (SPEC section 1: tag 4 = Pedestrian) ----------------------------
+// ---- Pedestrian crops (docs/dataset-format.md, "3. Media": tag 4 = Pedestrian) -------
 inline constexpr std::uint8_t kPedestrianTag = 4;
 inline constexpr int kVisibilityRadius = 2;  // px around round(u, v)
 inline constexpr double kCropScale = 1.2;    // side = 1.2 x the larger bbox side (20 % margin)

@@ -1,4 +1,4 @@
-// The CARLA-BSP data.csv reader and writer (SPEC section 1).
+// The CARLA-BSP data.csv reader and writer (docs/dataset-format.md, "2. data.csv").
 //
 // The file is read into a columnar PoseTable: one member per CSV column, numbers in flat
 // row-major arrays, strings dictionary-encoded. Reading scans the file once in parallel for
@@ -48,7 +48,7 @@ struct PoseTable {
   std::string crossing_column;
 };
 
-// The 24 columns in the original writer's order (SPEC section 1).
+// The 24 columns in the original writer's order (docs/dataset-format.md, "2. data.csv").
 inline constexpr std::size_t kPoseCsvColumnCount = 24;
 extern const std::array<const char*, kPoseCsvColumnCount> kPoseCsvColumns;
 // The newer name of column 21, accepted by the reader and by column selection.

@@ -1,6 +1,7 @@
-// Pinhole projection of the CARLA RGB camera (SPEC section 3): camera looks along its +x,
-// y right, z up; f = W / (2 tan(fov/2)); u = W/2 + f*y/x, v = H/2 - f*z/x. No distortion,
-// no half-pixel shift. Points with x <= 0 (behind the camera) project to NaN.
+// Pinhole projection of the CARLA RGB camera (docs/dataset-format.md,
+// "5. Geometry conventions"): camera looks along its +x, y right, z up;
+// f = W / (2 tan(fov/2)); u = W/2 + f*y/x, v = H/2 - f*z/x. No distortion, no half-pixel
+// shift. Points with x <= 0 (behind the camera) project to NaN.
 #pragma once
 #include <cstddef>
 #include <cstdint>

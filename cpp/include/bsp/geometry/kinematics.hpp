@@ -1,6 +1,7 @@
 // Rotations, rigid transforms and forward kinematics in the CARLA / Unreal convention
-// (SPEC section 3): left-handed, Z up, angles (pitch, yaw, roll) in degrees, lengths in
-// metres (or any unit: nothing here depends on it). All maths in double precision.
+// (docs/dataset-format.md, "5. Geometry conventions"): left-handed, Z up, angles (pitch,
+// yaw, roll) in degrees, lengths in metres (or any unit: nothing here depends on it). All
+// maths in double precision.
 #pragma once
 #include <Eigen/Core>
 #include <cstddef>

@@ -1,4 +1,4 @@
-// The 26-joint CARLA pedestrian skeleton (SPEC section 2).
+// The 26-joint CARLA pedestrian skeleton (docs/dataset-format.md, "4. The 26-joint skeleton").
 #pragma once
 #include <array>
 #include <cstdint>

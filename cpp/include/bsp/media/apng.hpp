@@ -9,7 +9,8 @@
 
 namespace bsp {
 
-// CARLA 0.9.13 semantic tags 0..22 (SPEC section 1) and their Cityscapes colours.
+// CARLA 0.9.13 semantic tags 0..22 (docs/dataset-format.md, "3. Media") and their
+// Cityscapes colours.
 inline constexpr int kNumTags = 23;
 extern const std::array<const char*, kNumTags> kTagNames;
 extern const std::array<std::array<std::uint8_t, 3>, kNumTags> kCityscapesColors;
