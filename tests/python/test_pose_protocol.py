@@ -74,3 +74,27 @@ def test_task_metrics_count_fully_occluded_frames_and_score_the_rest():
     assert r["pck_0.05_aligned"] == pytest.approx(49 / 50)
     assert r["pckhn_0.1_aligned"] == pytest.approx(49 / 50)
     assert r[f"pck_0.05/{JOINT_NAMES[5]}"] == 0.5 and r[f"pck_0.05/{JOINT_NAMES[0]}"] == 1.0
+
+
+def test_task_metrics_score_hands_and_feet_apart():
+    from bsp_fast.skeleton import JOINT_NAMES
+    from bsp_fast.training.scoring import TaskMetrics
+    from bsp_fast.training.tasks.pose_estimation import FEET, HANDS
+
+    L = 2
+    gt = np.stack([line_pose()] * L)[None].astype(np.float32)   # (1, 2, 26, 2)
+    box = np.tile(np.array([0, 0, 32, 32], np.float32), (1, L, 1))
+    out = torch.tensor(gt.copy())
+    left_hand, right_toe = JOINT_NAMES.index("crl_hand__L"), JOINT_NAMES.index("crl_toe__R")
+    out[0, 0, left_hand] += torch.tensor([0.0, 10.0])        # 1 of 4 hand entries wrong
+    out[0, :, right_toe] += torch.tensor([10.0, 0.0])        # 2 of 12 foot entries wrong
+    out[0, 1, JOINT_NAMES.index("crl_Head__C")] += 10.0      # neither a hand nor a foot
+    batch = {"targets": torch.tensor(gt), "visible": torch.ones(1, L, 26, dtype=torch.bool),
+             "crop_box": torch.tensor(box)}
+    tm = TaskMetrics("pose_estimation")
+    tm.update(out, batch, _Model())
+    r = tm.compute()
+    assert len(HANDS) == 2 and len(FEET) == 6
+    assert r["pck_0.05_hands"] == pytest.approx(3 / 4)
+    assert r["pck_0.05_feet"] == pytest.approx(10 / 12)
+    assert r["pck_0.05"] == pytest.approx(48 / 52)

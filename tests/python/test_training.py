@@ -37,7 +37,8 @@ KEYS = {"classification": {"loss", "f1", "precision", "recall", "accuracy", "aur
         "lifting": {"loss", "mpjpe_mm", "n_mpjpe_mm", "pa_mpjpe_mm", "mpjve_mm",
                     "normaliser_fallback"},
         "pose_estimation": {"loss", "pck_0.05", "pckhn_0.1", "pck_0.05_visible",
-                            "pck_0.05_occluded", "pck_0.05_aligned", "pckhn_0.1_aligned",
+                            "pck_0.05_occluded", "pck_0.05_hands", "pck_0.05_feet",
+                            "pck_0.05_aligned", "pckhn_0.1_aligned",
                             "fully_occluded_frames"} | {f"pck_0.05/{n}" for n in JOINT_NAMES}}
 REPO = Path(__file__).resolve().parents[2]
 

@@ -284,6 +284,7 @@ def test_checkpoint_every_is_checked_before_any_work(clips, tmp_path, capsys):
 
 
 def test_reproduce_continues_an_interrupted_row(tmp_path, monkeypatch):
+    from bsp_fast.reproduction import worker
     from bsp_fast.training import seeds
 
     run = tmp_path / "stopped"
@@ -293,8 +294,8 @@ def test_reproduce_continues_an_interrupted_row(tmp_path, monkeypatch):
     runs_mod.write_marker(run, state="interrupted", epoch=2, step=10)
     assert runs_mod.resumable(run) == run
     assert runs_mod.resumable(tmp_path / "finished-or-absent") is None
-    cmd = seeds._command(tmp_path / "c.yaml", True, run)
-    assert cmd[-4:] == ["train", "--resume", str(run), "--quiet"]
+    job = seeds._job(tmp_path / "c.yaml", True, run)
+    assert worker._argv(job) == ["--resume", str(run), "--quiet"]
     calls = []
     monkeypatch.setattr("bsp_fast.training.train.train", lambda **kw: calls.append(kw))
     seeds._run([("row seed 1", tmp_path / "c.yaml", run)], 1, True, lambda *_: None)

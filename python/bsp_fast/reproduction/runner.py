@@ -2,8 +2,8 @@
 the single-run table, runs in ``OUT/TABLE-BUDGET/ROW/``) or N training seeds (weights,
 batch order, noise draws; with ``--split-seeds`` also the recording split; runs in
 ``OUT/TABLE-BUDGET/ROW/seed-S/``), the seeds run as parallel processes of one torch thread
-each, finished runs reused and interrupted ones continued; the table's budget rule
-checked. Both give one result shape (:func:`run_table`); the statistics over seeds and
+each (one :mod:`.worker` per job slot, kept from run to run), finished runs reused and
+interrupted ones continued; the table's budget rule checked. Both give one result shape (:func:`run_table`); the statistics over seeds and
 recordings are :mod:`.evidence`'s, the report :mod:`.report`'s. See docs/reproduce.md.
 
 Configs go to ``OUT/TABLE-BUDGET/configs/ROW.yaml`` (one seed) or ``ROW-seed-S.yaml``,
@@ -13,8 +13,8 @@ are not mixed in unless ``allow_changed``.
 """
 from __future__ import annotations
 
+import json
 import os
-import sys
 import time
 from pathlib import Path
 
@@ -102,13 +102,11 @@ def _convert_once(plan) -> None:
             done.add(key)
 
 
-def _command(cfg_path, quiet: bool, stopped=None) -> list:
-    """``python -m bsp_fast train --config CFG`` of this very package (a worker process
-    that imports nothing from its parent: no forked torch or HDF5 state), or ``--resume
-    RUN`` of an interrupted run."""
-    what = ["--resume", str(stopped)] if stopped is not None else \
-        ["--config", str(cfg_path), "--force"]
-    return [sys.executable, "-m", "bsp_fast", "train", *what] + (["--quiet"] if quiet else [])
+def _job(cfg_path, quiet: bool, stopped=None) -> dict:
+    """A worker's job (:mod:`.worker`): ``bsp-train --config CFG --force`` of this very
+    package, or ``--resume RUN`` of an interrupted run."""
+    return {"resume": str(stopped), "quiet": quiet} if stopped is not None else \
+        {"config": str(cfg_path), "quiet": quiet}
 
 
 def _env() -> dict:
@@ -121,8 +119,70 @@ def _env() -> dict:
     return env
 
 
+class _Worker:
+    """One :mod:`.worker` process (imports nothing from this one: no forked torch or HDF5
+    state) that trains the runs it is sent one at a time; its stderr goes to a temporary
+    file whose tail a failure quotes."""
+
+    def __init__(self, env: dict, quiet: bool):
+        import subprocess
+        import tempfile
+
+        from .worker import command
+
+        read, write = os.pipe()
+        self.err = tempfile.TemporaryFile(mode="w+")
+        try:
+            self.proc = subprocess.Popen(command(write), env=env, stdin=subprocess.PIPE,
+                                         stdout=subprocess.DEVNULL if quiet else None,
+                                         stderr=self.err, pass_fds=(write,), text=True)
+        finally:
+            os.close(write)
+        os.set_blocking(read, False)
+        self.answers, self.buffer, self.job = read, b"", None
+
+    def send(self, name: str, job: dict) -> None:
+        self.proc.stdin.write(json.dumps(job) + "\n")
+        self.proc.stdin.flush()
+        self.job = (name, time.perf_counter())
+
+    def answer(self):
+        """The finished run's exit status, or None while it trains; RunError when the
+        worker died without answering."""
+        try:
+            self.buffer += os.read(self.answers, 4096)
+        except BlockingIOError:
+            pass
+        if b"\n" in self.buffer:
+            line, self.buffer = self.buffer.split(b"\n", 1)
+            return int(json.loads(line)["code"])
+        if self.proc.poll() is not None:
+            raise RunError(f"{self.job[0]}: the training process exited with "
+                           f"{self.proc.returncode}:\n{self.tail()}")
+        return None
+
+    def tail(self) -> str:
+        self.err.flush()
+        self.err.seek(0)
+        return self.err.read()[-2000:]
+
+    def close(self, stop: bool) -> None:
+        """Ends the worker: end of input when idle, SIGTERM (the run saves and stops at a
+        batch end, resumable) when ``stop``."""
+        try:
+            if stop and self.proc.poll() is None:
+                self.proc.terminate()
+            self.proc.stdin.close()
+        except OSError:  # it is gone already
+            pass
+        self.proc.wait()
+        os.close(self.answers)
+        self.err.close()
+
+
 def _run(todo, jobs: int, quiet: bool, log) -> None:
-    """Trains ``todo`` (``(name, config path)``) in up to ``jobs`` processes at once."""
+    """Trains ``todo`` (``(name, config path, interrupted run or None)``) in up to
+    ``jobs`` worker processes at once, each kept for the next run (:mod:`.worker`)."""
     if jobs <= 1:  # in this process, one run after the other
         from ..training.train import train
 
@@ -136,36 +196,33 @@ def _run(todo, jobs: int, quiet: bool, log) -> None:
                 train(config=str(cfg_path), force=True, quiet=quiet)
             log(f"[{name}] done in {time.perf_counter() - t0:.0f} s")
         return
-    import subprocess
-    import tempfile
-
-    pending, running = list(todo), []
-    env = _env()
+    pending, env = list(todo), _env()
+    workers = [_Worker(env, quiet) for _ in range(min(jobs, len(pending)))]
+    failed = True
     try:
-        while pending or running:
-            while pending and len(running) < jobs:
-                name, cfg_path, stopped = pending.pop(0)
-                err = tempfile.TemporaryFile(mode="w+")
-                proc = subprocess.Popen(_command(cfg_path, quiet, stopped), env=env, stderr=err,
-                                        stdout=subprocess.DEVNULL if quiet else None)
-                running.append((name, proc, err, time.perf_counter()))
+        while pending or any(w.job for w in workers):
+            for w in workers:
+                if w.job is None and pending:
+                    name, cfg_path, stopped = pending.pop(0)
+                    if stopped is not None:  # interrupted or killed: continue, not restart
+                        log(f"[{name}] continuing the interrupted run {stopped}")
+                    w.send(name, _job(cfg_path, quiet, stopped))
             time.sleep(0.2)
-            for item in list(running):
-                name, proc, err, t0 = item
-                if proc.poll() is None:
+            for w in workers:
+                if w.job is None:
                     continue
-                running.remove(item)
-                err.seek(0)
-                tail = err.read()[-2000:]
-                err.close()
-                if proc.returncode != 0:
-                    raise RunError(f"{name}: bsp-train exited with {proc.returncode}:\n{tail}")
+                code = w.answer()
+                if code is None:
+                    continue
+                name, t0 = w.job
+                w.job = None
+                if code != 0:
+                    raise RunError(f"{name}: bsp-train exited with {code}:\n{w.tail()}")
                 log(f"[{name}] done in {time.perf_counter() - t0:.0f} s")
+        failed = False
     finally:
-        for _, proc, err, _ in running:  # only the processes started here
-            proc.terminate()
-            proc.wait()
-            err.close()
+        for w in workers:  # only the processes started here
+            w.close(stop=failed)
 
 
 def _run_names(tab, wanted, seeds, base: Path, budget: str) -> dict:

@@ -6,6 +6,9 @@
 * ``pckhn_0.1``: PCKhn@0.1, normalised by the true hips-neck distance;
 * ``pck_0.05_visible`` / ``pck_0.05_occluded``: the same PCK@0.05 (same normaliser) over
   the joints the mask shows (``frames/joint_visible``) and over the others;
+* ``pck_0.05_hands`` / ``pck_0.05_feet``: the same PCK@0.05 over the hand joints
+  (:data:`HANDS`) and over the foot joints, ankle to toe end (:data:`FEET`), both sides:
+  the small, fast end effectors an average skeleton cannot place;
 * ``pck_0.05_aligned`` / ``pckhn_0.1_aligned``: the report's hips-aligned protocol, the
   prediction translated so its hips lie on the true hips (the hips not counted);
 * extra: ``pck_0.05/<joint>`` per joint and ``fully_occluded_frames`` (scored frames
@@ -16,10 +19,22 @@ from __future__ import annotations
 from ...skeleton import JOINT_NAMES
 from .base import Metric, Task
 
-__all__ = ["PoseEstimation"]
+__all__ = ["PoseEstimation", "HANDS", "FEET"]
+
+HANDS = ("crl_hand__L", "crl_hand__R")
+FEET = ("crl_foot__L", "crl_toe__L", "crl_toeEnd__L", "crl_foot__R", "crl_toe__R",
+        "crl_toeEnd__R")
 
 _PER_JOINT = tuple(Metric(f"pck_0.05/{n}", f"PCK@0.05 {n}", "fraction", "higher", "pct")
                    for n in JOINT_NAMES)
+
+
+def _joints(names, device):
+    import torch
+
+    mask = torch.zeros(len(JOINT_NAMES), dtype=torch.bool, device=device)
+    mask[[JOINT_NAMES.index(n) for n in names]] = True
+    return mask
 
 
 class PoseEstimation(Task):
@@ -32,6 +47,8 @@ class PoseEstimation(Task):
                Metric("pckhn_0.1", "PCKhn@0.1", "fraction", "higher", "pct"),
                Metric("pck_0.05_visible", "PCK@0.05 visible", "fraction", "higher", "pct"),
                Metric("pck_0.05_occluded", "PCK@0.05 occluded", "fraction", "higher", "pct"),
+               Metric("pck_0.05_hands", "PCK@0.05 hands", "fraction", "higher", "pct"),
+               Metric("pck_0.05_feet", "PCK@0.05 feet", "fraction", "higher", "pct"),
                Metric("pck_0.05_aligned", "PCK@0.05 hips-aligned", "fraction", "higher", "pct"),
                Metric("pckhn_0.1_aligned", "PCKhn@0.1 hips-aligned", "fraction", "higher",
                       "pct"))
@@ -59,6 +76,8 @@ class PoseEstimation(Task):
                 "pckhn_0.1": M.PCK(alpha=0.1, norm="hips_neck"),
                 "pck_0.05_visible": M.PCK(alpha=0.05, norm="bbox"),
                 "pck_0.05_occluded": M.PCK(alpha=0.05, norm="bbox"),
+                "pck_0.05_hands": M.PCK(alpha=0.05, norm="bbox"),
+                "pck_0.05_feet": M.PCK(alpha=0.05, norm="bbox"),
                 "pck_0.05_aligned": M.PCK(alpha=0.05, norm="bbox", align="hips"),
                 "pckhn_0.1_aligned": M.PCK(alpha=0.1, norm="hips_neck", align="hips"),
                 "pck_0.05_per_joint": M.PCKPerJoint(alpha=0.05, norm="bbox",
@@ -85,6 +104,9 @@ class PoseEstimation(Task):
             scores[key].update(output, target, visible=present)
         scores["pck_0.05_visible"].update(output, target, visible=present, select=visible)
         scores["pck_0.05_occluded"].update(output, target, visible=present, select=~visible)
+        for key, joints in (("pck_0.05_hands", HANDS), ("pck_0.05_feet", FEET)):
+            scores[key].update(output, target, visible=present,
+                               select=_joints(joints, present.device).expand_as(present))
         box = batch["crop_box"][:, sl]
         scores["fully_occluded_frames"].update(~torch.isfinite(box).all(-1))
 
