@@ -154,4 +154,14 @@ def test_seeds_pose_table_scores_noisy_boxes_per_seed(converted, tmp_path, capsy
         noisy = json.loads((Path(one["run"]) / "test_box_noise.json").read_text())
         assert noisy["box_noise"] == {"scale": 0.1, "shift": 0.05}
         assert one["metrics"]["pck_0.05_noisy"] == noisy["test"]["pck_0.05"]
+        # the noisy sums per recording sit beside the clean ones: intervals for both
+        rec = json.loads((Path(one["run"]) / "test_per_recording.json").read_text())["test"]
+        for name in ("pck_0.05", "pckhn_0.1"):
+            sums = rec["metrics"][f"{name}_noisy"]
+            assert len(sums["num"]) == len(rec["recordings"])
+            assert sum(sums["num"]) / sum(sums["den"]) == pytest.approx(noisy["test"][name])
+    from bsp_fast.reproduction.evidence import _Sums
+
+    per_seed, _ = _Sums(saved).seeds("pose_cnn", "pck_0.05_noisy", False)
+    assert len(per_seed) == 2  # what the two-level intervals resample, seed by seed
     assert "PCK@0.05 noisy boxes" in text

@@ -26,7 +26,8 @@ SPLIT_STAGES = {"test": "test", "val": "validate"}
 @dataclass
 class EvalResult:
     """``metrics``: the split's metrics (mm for 3D) under the run's data settings unless
-    overridden; ``config``: the settings used."""
+    overridden; ``config``: the settings used; ``per_recording``: the test split's sums
+    per recording (a ``test`` section of ``test_per_recording.json``; None for val)."""
     task: str
     model: str
     split: str
@@ -35,6 +36,7 @@ class EvalResult:
     config: dict
     clips: int = 0
     recordings: int = 0
+    per_recording: dict | None = None
 
 
 def load_run(run, which: str = "best", data=None, **overrides):
@@ -135,7 +137,9 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
     metrics = dict(module.results.get(split, {}))
     return EvalResult(task=module.task, model=module.hparams["model"], split=split,
                       metrics=metrics, checkpoint=Path(ckpt), config=cfg,
-                      clips=counter.clips, recordings=len(counter.recordings))
+                      clips=counter.clips, recordings=len(counter.recordings),
+                      per_recording=module.results.get("test_per_recording")
+                      if split == "test" else None)
 
 
 def scored_clips_callback():
