@@ -35,7 +35,11 @@ before running it (bsp-reproduce records its hash):
     bsp-reproduce --table runs/pose_budget/ablation_pose_temporal.yaml --data data/medium \\
         --seeds 3 --jobs 2
 
-``table`` rewrites the table from an existing ``budget.json``. ``--smoke``: one epoch of
+``--rule cpu`` chooses the configuration by its validation PCK@0.05 at equal CPU instead
+(the least CPU every run reached), and the budget is that configuration's own plateau or
+the updates it affords in ``--cpu-minutes``: the main table's pose_temporal row, where the
+crop size is a cost as much as a setting. ``--no-train`` fixes the budget from the runs as
+they are. ``table`` rewrites the table from an existing ``budget.json``. ``--smoke``: one epoch of
 two batches per chunk, two chunks, one seed, width 4: the plumbing only.
 """
 from __future__ import annotations
@@ -111,11 +115,34 @@ def mean_curve(series: list) -> tuple:
     return np.array(common), vals.mean(0), std
 
 
-def fix_budget(configs: dict, cpu_cap_s: float, tolerance: float, patience: int) -> dict:
+def at_equal_cpu(configs: dict) -> dict:
+    """``{"cpu_s", "values": {name: mean val value}}``: each configuration's mean curve at
+    the CPU every one of its seeds reached in every configuration (the smallest of their
+    last CPU seconds): the value of its last epoch within that CPU, per seed, averaged."""
+    lasts = [x["cpu_s"][-1] for c in configs.values() for x in c["series"] if len(x["cpu_s"])]
+    if not lasts:
+        return {"cpu_s": None, "values": {}}
+    cpu = float(min(lasts))
+    values = {}
+    for name, c in configs.items():
+        per = [x["value"][np.flatnonzero(x["cpu_s"] <= cpu)[-1]] for x in c["series"]
+               if len(x["cpu_s"]) and x["cpu_s"][0] <= cpu]
+        values[name] = float(np.mean(per)) if per else None
+    return {"cpu_s": cpu, "values": values}
+
+
+def fix_budget(configs: dict, cpu_cap_s: float, tolerance: float, patience: int,
+               rule: str = "updates") -> dict:
     """The budget from ``{name: {"crop_size", "width", "series": [per seed]}}`` (module
-    docstring); JSON-able."""
+    docstring); JSON-able. ``rule="cpu"``: the configuration is chosen by its validation
+    value at equal CPU (:func:`at_equal_cpu`), and the budget is that configuration's own
+    plateau, or the updates it affords in the cap (the others are compared, not trained
+    as long)."""
+    if rule not in ("updates", "cpu"):
+        raise ValueError(f"rule must be 'updates' or 'cpu', got {rule!r}")
     out = {"configs": {}, "tolerance": tolerance, "patience": patience,
-           "cpu_minutes_cap": cpu_cap_s / 60}
+           "cpu_minutes_cap": cpu_cap_s / 60, "rule": rule,
+           "equal_cpu": at_equal_cpu(configs)}
     wants, costs = [], []
     for name, c in configs.items():
         u, m, s = mean_curve(c["series"])
@@ -130,6 +157,10 @@ def fix_budget(configs: dict, cpu_cap_s: float, tolerance: float, patience: int)
             costs.append(per_update)
     if not wants:
         raise ValueError("no run logged a validated epoch: nothing to fix a budget on")
+    if rule == "cpu":
+        eq = {n: v for n, v in out["equal_cpu"]["values"].items() if v is not None}
+        pick = out["configs"][max(eq, key=eq.get)]
+        wants, costs = [pick["plateau"]["updates"]], [pick["cpu_s_per_update"]]
     want, affordable = max(wants), math.floor(cpu_cap_s / max(costs))
     updates = int(min(want, affordable))
     per_epoch = min(v["updates"][0] for v in out["configs"].values() if v["updates"])
@@ -138,7 +169,8 @@ def fix_budget(configs: dict, cpu_cap_s: float, tolerance: float, patience: int)
     for name, v in out["configs"].items():  # validation PCK at (or before) the budget
         ok = [i for i, x in enumerate(v["updates"]) if x <= updates]
         at[name] = v["mean"][ok[-1]] if ok else None
-    best = max((n for n in at if at[n] is not None), key=at.get)
+    best = max((n for n in at if at[n] is not None), key=at.get) if rule == "updates" else \
+        max(eq, key=eq.get)
     out.update(updates=updates, epochs=epochs, updates_per_epoch=per_epoch,
                limited_by_cpu=affordable < want,
                all_plateaued=all(v["plateau"]["reached"] for v in out["configs"].values()),
@@ -243,7 +275,9 @@ def curves(args) -> int:
                              max_epochs=args.max_epochs))
     print(f"{len(jobs)} curve runs ({args.jobs} at a time, one thread each) -> {out}/runs",
           flush=True)
-    if args.jobs > 1:
+    if args.no_train:
+        jobs = []
+    if args.jobs > 1 and jobs:
         with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
             list(pool.map(run_curve, jobs))
     else:
@@ -252,7 +286,8 @@ def curves(args) -> int:
     configs = {name: dict(c, series=[run_series(out / "runs" / name / f"seed-{s}")
                                      for s in range(args.seeds)])
                for name, c in configurations(args).items()}
-    budget = fix_budget(configs, args.cpu_minutes * 60, args.tolerance, args.patience)
+    budget = fix_budget(configs, args.cpu_minutes * 60, args.tolerance, args.patience,
+                        args.rule)
     budget.update(batch_size=args.batch_size, seeds=args.seeds, smoke=bool(args.smoke),
                   crop_sizes=list(args.crop_sizes), widths=list(args.widths),
                   data=str(args.data))
@@ -278,11 +313,21 @@ def write_budget(out: Path, b: dict) -> None:
         lines.append(f"| {name} | {len(c['updates'])} | {where} | {p['value']:.3f} | "
                      f"{p['best']:.3f} | {c['cpu_s_per_update']:.2f} | "
                      f"{_fmt(b['val_at_budget'][name])} |")
+    eq = b.get("equal_cpu") or {}
+    if eq.get("cpu_s") is not None:
+        lines += ["", f"Validation PCK@0.05 at equal CPU ({eq['cpu_s'] / 60:.1f} CPU min, the "
+                  "least any run reached): " + ", ".join(
+                      f"{n} {_fmt(v)}" for n, v in eq["values"].items()) + "."]
+    rule = b.get("rule", "updates")
+    lines += ["", "Rule: " + ("every configuration trains the budget's updates; the full row "
+                              "is the best at them." if rule == "updates" else
+                              "the full row is the best at equal CPU; the budget is its own "
+                              "plateau, or the updates it affords in the cap.")]
     cap = " (cut by the CPU cap)" if b["limited_by_cpu"] else ""
     lines += ["", f"**Budget: {b['updates']} updates{cap}, {b['epochs']} epochs of "
               f"{b['updates_per_epoch']:.0f}.** Every curve reached a plateau: "
               f"{'yes' if b['all_plateaued'] else 'NO (the budget is the cap, not a plateau)'}. "
-              f"Full row (best validation PCK@0.05 at the budget): crop {b['crop_size']}, "
+              f"Full row: crop {b['crop_size']}, "
               f"width {b['width']}.", ""]
     write_text(out / "budget.md", "\n".join(lines))
     _figure(out / "budget_curves.png", b)
@@ -416,6 +461,12 @@ def main(argv=None) -> int:
     c.add_argument("--max-epochs", type=int, default=200, help="epochs cap per run (200)")
     c.add_argument("--tolerance", type=float, default=0.005, help="plateau tolerance (0.005)")
     c.add_argument("--patience", type=int, default=3, help="plateau epochs (3)")
+    c.add_argument("--rule", choices=("updates", "cpu"), default="updates",
+                   help="updates: every configuration trains the budget's updates, the best "
+                   "at them is chosen (the ablation table's rule); cpu: the best at equal CPU "
+                   "is chosen and the budget is its own plateau or cap (default: updates)")
+    c.add_argument("--no-train", action="store_true",
+                   help="fix the budget from the runs as they are (train nothing more)")
     c.add_argument("--smoke", action="store_true", help="plumbing only: tiny chunks, 1 seed")
     t = sub.add_parser("table", help="write the ablation table from OUT/budget.json again")
     t.add_argument("--out", default="runs/pose_budget")

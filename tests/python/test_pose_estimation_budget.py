@@ -83,6 +83,27 @@ def test_budget_by_hand():
     assert capped["chosen"] == "crop64"  # 0.70 against 0.50 at 30 updates
 
 
+def test_budget_by_hand_at_equal_cpu():
+    """rule cpu: crop64 (1 s per update) and crop96 (2 s) compared at the least CPU any run
+    reached, 80 s: crop64 0.70 (80 updates), crop96 0.60 (40 updates); crop64 is chosen and
+    the budget is its own plateau, 30 updates, or what it affords in a 20 s cap."""
+    flat = [0.5, 0.6, 0.70, 0.70, 0.70, 0.70, 0.70, 0.70]
+    late = [0.3, 0.4, 0.50, 0.60, 0.75, 0.75, 0.75, 0.75]
+    configs = {"crop64": {"crop_size": 64, "width": 16, "series": [_series(flat, 1.0)]},
+               "crop96": {"crop_size": 96, "width": 16, "series": [_series(late, 2.0)]}}
+    eq = pb.at_equal_cpu(configs)
+    assert eq == {"cpu_s": 80.0, "values": {"crop64": 0.70, "crop96": 0.60}}
+    b = pb.fix_budget(configs, cpu_cap_s=1000, tolerance=0.005, patience=2, rule="cpu")
+    assert (b["chosen"], b["crop_size"], b["updates"], b["epochs"], b["limited_by_cpu"]) == \
+        ("crop64", 64, 30, 3, False)
+    capped = pb.fix_budget(configs, cpu_cap_s=20, tolerance=0.005, patience=2, rule="cpu")
+    assert (capped["chosen"], capped["updates"], capped["limited_by_cpu"]) == ("crop64", 20, True)
+    # the updates rule on the same curves picks crop96 (0.75 against 0.70 at 50 updates)
+    assert pb.fix_budget(configs, 1000, 0.005, 2)["chosen"] == "crop96"
+    with pytest.raises(ValueError, match="rule must be"):
+        pb.fix_budget(configs, 1000, 0.005, 2, rule="wall")
+
+
 def test_the_ablation_table_loads_with_one_budget_rule(tmp_path):
     import yaml
 
