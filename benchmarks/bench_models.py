@@ -31,17 +31,11 @@ DEFAULT_OVERRIDES = "poseformer=8,pose_cnn=8"
 
 
 def cpu_info() -> dict:
-    flags = ""
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("flags"):
-                    flags = line
-                    break
-    except OSError:
-        pass
-    native = [f for f in ("avx512_bf16", "amx_bf16") if f" {f}" in flags]
-    return {"capability": torch.backends.cpu.get_cpu_capability(), "bf16_native": native,
+    from bsp_fast.training.precision import cpu_flags, cpu_summary
+
+    native = [f for f in cpu_flags() if f in ("avx512_bf16", "amx_bf16")]
+    return {"cpu": cpu_summary(), "capability": torch.backends.cpu.get_cpu_capability(),
+            "bf16_native": native,
             "threads": torch.get_num_threads(), "cores": os.cpu_count()}
 
 

@@ -37,9 +37,9 @@ def main(argv=None) -> int:
     from bsp_fast.training import precision as P
 
     torch.set_num_threads(args.threads)
-    flags = open("/proc/cpuinfo").read()
-    native = [f for f in ("avx512_bf16", "amx_bf16") if f in flags]
-    print(f"CPU bf16: {', '.join(native) or 'none (AVX2 only)'}; {args.threads} thread(s); "
+    native = [f for f in P.cpu_flags() if f in ("avx512_bf16", "amx_bf16")]
+    print(f"CPU {P.cpu_summary()}; bf16: {', '.join(native) or 'none (AVX2 only)'}; "
+          f"{args.threads} thread(s); "
           f"torch {torch.__version__}; load average {os.getloadavg()[0]:.1f}")
     print("| model | batch | auto picks | why | probe s |\n|---|---|---|---|---|")
     for name, batch_size, length in MODELS:

@@ -26,18 +26,6 @@ import time
 from pathlib import Path
 
 
-def cpu_flags() -> str:
-    try:
-        text = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return "unknown"
-    line = next((ln for ln in text.splitlines() if ln.startswith("flags")), "")
-    want = ("avx2", "avx512f", "avx512_bf16", "amx_bf16")
-    model = next((ln.split(":", 1)[1].strip() for ln in text.splitlines()
-                  if ln.startswith("model name")), "unknown CPU")
-    return f"{model}; " + " ".join(f for f in want if f in line.split())
-
-
 def _children_cpu() -> float:
     ru = resource.getrusage(resource.RUSAGE_CHILDREN)
     return ru.ru_utime + ru.ru_stime
@@ -126,7 +114,9 @@ def main(argv=None) -> int:
         vals = [r[key] for r in rows if r["mode"] == mode]
         return sum(vals) / len(vals)
 
-    summary = {"cpu": cpu_flags(), "task": args.task, "model": args.model, "runs": args.runs,
+    from bsp_fast.training.precision import cpu_summary
+
+    summary = {"cpu": cpu_summary(), "task": args.task, "model": args.model, "runs": args.runs,
                "jobs": args.jobs, "epochs": args.epochs, "rows": rows, "same_metrics": True,
                "wall_ratio": mean("fresh", "wall_s") / mean("workers", "wall_s"),
                "cpu_ratio": mean("fresh", "cpu_s") / mean("workers", "cpu_s"),

@@ -132,9 +132,9 @@ def main(argv=None) -> int:
     from bsp_fast.data.testing import write_clip_file
     from bsp_fast.models.lstm import cpu_bf16
 
-    flags = sorted({f for line in open("/proc/cpuinfo") if line.startswith("flags")
-                    for f in line.split()[2:] if f in ("avx2", "avx512f", "avx512_bf16", "amx_bf16")})
-    print(f"CPU flags: {' '.join(flags)}; bf16 autocast native: {cpu_bf16()}; "
+    from bsp_fast.training.precision import cpu_summary
+
+    print(f"CPU: {cpu_summary()}; bf16 autocast native: {cpu_bf16()}; "
           f"load average {os.getloadavg()[0]:.2f}; {args.train_clips} train clips, "
           f"{args.epochs} epochs, one thread per process", flush=True)
     if not cpu_bf16():

@@ -25,7 +25,10 @@ import time
 from pathlib import Path
 
 __all__ = ["resolve_precision", "decide_precision", "native_bf16", "check_precision",
-           "probe_cache_path", "probe_key", "time_steps", "MARGIN"]
+           "probe_cache_path", "probe_key", "time_steps", "MARGIN", "cpu_flags", "cpu_summary"]
+
+#: the CPU flags that decide bf16's speed on a CPU, as benchmarks report them
+SPEED_FLAGS = ("avx2", "avx512f", "avx512_bf16", "amx_bf16", "amx_tile")
 
 #: bf16 is picked when its median training step is at most this fraction of float32's
 MARGIN = 0.9
@@ -73,6 +76,23 @@ def _cpu_name() -> str:
     except OSError:
         pass
     return platform.processor() or platform.machine()
+
+
+def cpu_flags() -> list:
+    """Which of :data:`SPEED_FLAGS` this CPU has (``/proc/cpuinfo``; [] where unreadable)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return []
+    have = next((set(ln.split(":", 1)[1].split()) for ln in text.splitlines()
+                 if ln.startswith("flags")), set())
+    return [f for f in SPEED_FLAGS if f in have]
+
+
+def cpu_summary() -> str:
+    """``"<model name>; avx2 avx512f avx512_bf16"``: the line every benchmark prints so that
+    its numbers name the kind of CPU they were measured on."""
+    return f"{_cpu_name()}; {' '.join(cpu_flags()) or 'none of ' + ' '.join(SPEED_FLAGS)}"
 
 
 def probe_cache_path() -> Path:
