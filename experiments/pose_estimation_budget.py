@@ -399,7 +399,8 @@ def ablation_table(b: dict) -> dict:
         "table": TABLE, "task": "pose_estimation",
         "title": "pose_temporal ablations (issue #38; test split, PCK in %)",
         "metrics": {"pck_0.05": {}, "pck_0.05_visible": {}, "pck_0.05_occluded": {},
-                    "pckhn_0.1": {}, "pck_0.05_noisy": {}},
+                    "pck_0.05_hands": {}, "pck_0.05_feet": {}, "pckhn_0.1": {},
+                    "pck_0.05_noisy": {}},
         "box_noise": {"scale": 0.1, "shift": 0.05},
         "budget_rule": f"every row trains exactly max_steps optimiser updates (fixed on "
                        f"validation curves by experiments/pose_estimation_budget.py: "

@@ -128,6 +128,7 @@ def test_the_ablation_table_loads_with_one_budget_rule(tmp_path):
     loaded = load_table(path)  # rows, findings, metrics and the budget rule checked
     assert [r["name"] for r in loaded["rows"]] == names
     assert set(loaded["metrics"]) == {"pck_0.05", "pck_0.05_visible", "pck_0.05_occluded",
+                                      "pck_0.05_hands", "pck_0.05_feet",
                                       "pckhn_0.1", "pck_0.05_noisy"}
 
 
