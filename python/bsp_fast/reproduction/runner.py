@@ -3,8 +3,9 @@ the single-run table, runs in ``OUT/TABLE-BUDGET/ROW/``) or N training seeds (we
 batch order, noise draws; with ``--split-seeds`` also the recording split; runs in
 ``OUT/TABLE-BUDGET/ROW/seed-S/``), the seeds run as parallel processes of one torch thread
 each (one :mod:`.worker` per job slot, kept from run to run), finished runs reused and
-interrupted ones continued; the table's budget rule checked. Both give one result shape (:func:`run_table`); the statistics over seeds and
-recordings are :mod:`.evidence`'s, the report :mod:`.report`'s. See docs/reproduce.md.
+interrupted ones continued; the table's budget rule checked. Both give one result shape
+(:func:`run_table`); the statistics over seeds and recordings are :mod:`.evidence`'s, the
+report :mod:`.report`'s. See docs/reproduce.md.
 
 Configs go to ``OUT/TABLE-BUDGET/configs/ROW.yaml`` (one seed) or ``ROW-seed-S.yaml``,
 each usable as ``bsp-train --config``. Every run is recorded under the table file's
@@ -142,9 +143,14 @@ class _Worker:
         self.answers, self.buffer, self.job = read, b"", None
 
     def send(self, name: str, job: dict) -> None:
-        self.proc.stdin.write(json.dumps(job) + "\n")
-        self.proc.stdin.flush()
         self.job = (name, time.perf_counter())
+        try:
+            self.proc.stdin.write(json.dumps(job) + "\n")
+            self.proc.stdin.flush()
+        except BrokenPipeError:  # it died after its last run
+            self.proc.wait()
+            raise RunError(f"{name}: the training process exited with "
+                           f"{self.proc.returncode} before this run:\n{self.tail()}") from None
 
     def answer(self):
         """The finished run's exit status, or None while it trains; RunError when the
