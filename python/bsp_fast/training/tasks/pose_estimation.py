@@ -16,6 +16,8 @@
 """
 from __future__ import annotations
 
+import functools
+
 from ...skeleton import JOINT_NAMES
 from .base import Metric, Task
 
@@ -29,7 +31,9 @@ _PER_JOINT = tuple(Metric(f"pck_0.05/{n}", f"PCK@0.05 {n}", "fraction", "higher"
                    for n in JOINT_NAMES)
 
 
+@functools.lru_cache(maxsize=None)
 def _joints(names, device):
+    """The ``(26,)`` mask of ``names``, built once per device (every test batch asks)."""
     import torch
 
     mask = torch.zeros(len(JOINT_NAMES), dtype=torch.bool, device=device)
