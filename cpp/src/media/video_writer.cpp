@@ -1,5 +1,8 @@
 // VideoWriter: RGB frames -> swscale -> libx264 -> MP4 muxer, through a temporary file.
 #include <cmath>
+#include <cstring>
+#include <string>
+#include <utility>
 
 #include "bsp/common/errors.hpp"
 #include "bsp/media/video.hpp"
@@ -7,6 +10,7 @@
 #include "ffmpeg.hpp"
 
 extern "C" {
+#include <libavutil/cpu.h>
 #include <libavutil/opt.h>
 }
 
@@ -17,6 +21,32 @@ namespace {
 const AVOutputFormat* guess_format(const std::string& path) {
   const AVOutputFormat* f = av_guess_format(nullptr, path.c_str(), nullptr);
   return f ? f : av_guess_format("mp4", nullptr, nullptr);
+}
+
+// x264's instruction sets for this CPU, AVX-512 left out. Debian's x264 (0.164.3095) gives
+// different bytes for the same frames from one run to the next with its AVX-512 code (4 of
+// 40 identical writes in one process on an avx512 EPYC, a dataset that bsp-synth made twice
+// differed in one MP4); up to AVX2 it gave 64 of 64 identical files, the same bytes as its
+// usual output there. Only sets the CPU has are named: x264 trusts the list.
+// The rows' padding past the picture, which swscale leaves unwritten and x264 may read, is
+// zero rather than whatever the allocator held.
+void zero(AVFrame* f) {
+  for (AVBufferRef* b : f->buf)
+    if (b) std::memset(b->data, 0, b->size);
+}
+
+std::string x264_asm() {
+  const int f = av_get_cpu_flags();
+  static const std::pair<int, const char*> sets[] = {
+      {AV_CPU_FLAG_MMXEXT, "MMX2"}, {AV_CPU_FLAG_SSE, "SSE"},     {AV_CPU_FLAG_SSE2, "SSE2"},
+      {AV_CPU_FLAG_SSE3, "SSE3"},   {AV_CPU_FLAG_SSSE3, "SSSE3"}, {AV_CPU_FLAG_SSE4, "SSE4.1"},
+      {AV_CPU_FLAG_SSE42, "SSE4.2"}, {AV_CPU_FLAG_AVX, "AVX"},    {AV_CPU_FLAG_XOP, "XOP"},
+      {AV_CPU_FLAG_FMA4, "FMA4"},   {AV_CPU_FLAG_FMA3, "FMA3"},   {AV_CPU_FLAG_BMI1, "BMI1"},
+      {AV_CPU_FLAG_BMI1, "LZCNT"},  {AV_CPU_FLAG_BMI2, "BMI2"},   {AV_CPU_FLAG_AVX2, "AVX2"}};
+  std::string out;
+  for (const auto& [flag, name] : sets)
+    if (f & flag) out += (out.empty() ? "" : ",") + std::string(name);
+  return out.empty() ? "0" : out;  // "0": x264's C code only
 }
 
 }  // namespace
@@ -70,6 +100,9 @@ void VideoWriter::Impl::open_encoder(double fps, std::int64_t bitrate, const std
                "x264 preset '" + preset + "'");
   BSP_AV_CHECK(VideoEncodeError, av_opt_set(enc->priv_data, "profile", "high", 0), path,
                "x264 profile high");
+  BSP_AV_CHECK(VideoEncodeError,
+               av_opt_set(enc->priv_data, "x264-params", ("asm=" + x264_asm()).c_str(), 0),
+               path, "x264 instruction sets");
   BSP_AV_CHECK(VideoEncodeError, avcodec_open2(enc.get(), codec, nullptr), path,
                "open libx264");
 }
@@ -130,6 +163,7 @@ VideoWriter::VideoWriter(std::string path, int width, int height, double fps,
   m.yuv->width = width;
   m.yuv->height = height;
   BSP_AV_CHECK(VideoEncodeError, av_frame_get_buffer(m.yuv.get(), 0), m.path, "frame buffer");
+  zero(m.yuv.get());
   m.pkt = av::alloc_packet<VideoEncodeError>(m.path);
   m.sws.reset(sws_getContext(width, height, AV_PIX_FMT_RGB24, width, height, AV_PIX_FMT_YUV420P,
                              SWS_BICUBIC, nullptr, nullptr, nullptr));
@@ -141,7 +175,9 @@ VideoWriter::~VideoWriter() = default;
 void VideoWriter::write(const std::uint8_t* rgb) {
   Impl& m = *impl_;
   if (m.closed) m.fail("write() after close()");
+  const std::uint8_t* before = m.yuv->data[0];
   BSP_AV_CHECK(VideoEncodeError, av_frame_make_writable(m.yuv.get()), m.path, "frame buffer");
+  if (m.yuv->data[0] != before) zero(m.yuv.get());
   const std::uint8_t* src[1] = {rgb};
   const int src_stride[1] = {3 * m.width};
   sws_scale(m.sws.get(), src, src_stride, 0, m.height, m.yuv->data, m.yuv->linesize);
