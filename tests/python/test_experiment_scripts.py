@@ -73,3 +73,54 @@ def test_redraw_shift_smoke(clips, tmp_path):
     # --resume keeps the rows written
     assert rs.main([str(run.run_dir), "--out", str(tmp_path / "o"), "--resume"]) == 0
     assert len(json.loads((tmp_path / "o" / "redraw_shift.json").read_text())["rows"]) == 1
+
+
+def _fake_results(folder: Path, precision: str, per_seed: dict) -> Path:
+    """A table's results.json with one row, lifting/lstm, and per-recording mpjpe sums."""
+    folder.mkdir(parents=True)
+    seeds, values = {}, []
+    for seed, num in per_seed.items():
+        pr = folder / f"seed-{seed}.json"
+        pr.write_text(json.dumps({"test": {"recordings": ["r1", "r2", "r3"], "metrics": {
+            "mpjpe_mm": {"num": num, "den": [1.0, 2.0, 1.0]}}}}))
+        seeds[str(seed)] = {"precision": precision, "per_recording": str(pr),
+                            "seconds": {"fit_cpu": 30.0}}
+        values.append(sum(num) / 4.0)
+    mean = sum(values) / len(values)
+    (folder / "results.json").write_text(json.dumps({"table": "lifting", "budget": "quick",
+        "results": {"lstm": {"seeds": seeds, "metrics": {"mpjpe_mm": mean},
+                             "std": {"mpjpe_mm": 0.0}}}}))
+    return folder
+
+
+def test_precision_retrain_difference_by_hand_and_verdicts(tmp_path):
+    pr = _load("precision_retrain")
+    auto = _fake_results(tmp_path / "auto", "bf16-mixed",
+                         {1: [10.0, 40.0, 30.0], 2: [12.0, 36.0, 33.0]})
+    same = _fake_results(tmp_path / "same", "32", {1: [10.0, 40.0, 30.0], 2: [12.0, 36.0, 33.0]})
+    noisy = _fake_results(tmp_path / "noisy", "32", {1: [11.0, 42.0, 29.0], 2: [12.0, 40.0, 31.0]})
+    # the same shift on every seed and recording: no variance at either level
+    shifted = _fake_results(tmp_path / "shifted", "32",
+                            {1: [15.0, 50.0, 35.0], 2: [17.0, 46.0, 38.0]})
+    out = tmp_path / "out"
+    args = ["--auto", str(auto), "--row", "lstm", "--metric", "mpjpe_mm", "--out", str(out)]
+    assert pr.main([*args, "--fp32", str(same), "--margin", "2%"]) == 0
+    row = json.loads((out / "precision_retrain.json").read_text())["rows"][0]
+    # auto: seed 1 (10 + 40 + 30) / 4 = 20, seed 2 81 / 4 = 20.25: 20.125
+    assert row["auto"] == pytest.approx(20.125) and row["difference"] == 0.0
+    assert row["margin"] == pytest.approx(0.4025) and row["verdict"] == "agrees"
+    assert row["fit_cpu_min"] == {"auto": 1.0, "fp32": 1.0}
+    assert pr.main([*args, "--fp32", str(noisy), "--margin", "2%"]) == 0
+    rows = json.loads((out / "precision_retrain.json").read_text())["rows"]
+    assert len(rows) == 1  # the same table, row and metric: replaced
+    # float32: seed 1 82 / 4 = 20.5, seed 2 83 / 4 = 20.75; minus auto: +0.5
+    assert rows[0]["difference"] == pytest.approx(0.5)
+    lo, hi = rows[0]["interval"]
+    assert lo < 0.5 < hi and rows[0]["verdict"] == "undetermined"
+    assert pr.main([*args, "--fp32", str(shifted), "--margin", "0.5"]) == 0
+    rows = json.loads((out / "precision_retrain.json").read_text())["rows"]
+    # +5 per unit of den on every recording: (5 + 10 + 5) / 4 = +5
+    assert rows[0]["difference"] == pytest.approx(5.0) and rows[0]["verdict"] == "differs"
+    assert "| lifting / lstm | mpjpe_mm | 2 |" in (out / "precision_retrain.md").read_text()
+    with pytest.raises(SystemExit, match="not float32"):
+        pr.main([*args, "--fp32", str(auto), "--margin", "1"])

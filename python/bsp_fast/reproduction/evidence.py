@@ -26,8 +26,8 @@ from ..metrics import uncertainty as U
 from .findings import better as _sign, format_value
 from .protocol import confirmatory
 
-__all__ = ["summarise", "evaluate_findings", "statistics", "DEFAULT_MARGIN", "METHOD",
-           "CLIP_METRICS"]
+__all__ = ["summarise", "evaluate_findings", "statistics", "rerun_difference",
+           "DEFAULT_MARGIN", "METHOD", "CLIP_METRICS"]
 
 #: the interval and test of cells and findings: the method whose coverage was measured
 #: within 93-97 % at the tables' sizes (docs/reproduce.md)
@@ -377,3 +377,25 @@ def evaluate_findings(tab: dict, res: dict) -> list:
             continue
         out.append({**base, **_finding(tab, f, c)})
     return out
+
+
+def rerun_difference(res_a: dict, row_a: str, res_b: dict, row_b: str, metric: str, *,
+                     paired_seeds: bool = True) -> H.Test:
+    """``b - a`` of ``metric`` for one row trained twice under other options (e.g. float32
+    against ``--precision auto``'s bf16: ``experiments/precision_retrain.py``), from two
+    results (``results.json``) on the same test split: recordings drawn jointly, seeds
+    within each row, or with ``paired_seeds`` the same seed numbers drawn together (a seed
+    fixes the initial weights and the data order under both options)."""
+    ra, rb = res_a["results"][row_a], res_b["results"][row_b]
+    if paired_seeds and list(ra["seeds"]) != list(rb["seeds"]):
+        raise ValueError(f"paired seeds need the same seeds in both results, got "
+                         f"{list(ra['seeds'])} and {list(rb['seeds'])}")
+    res = {"results": {"a": {"seeds": ra["seeds"], "source": ra.get("source")},
+                       "b": {"seeds": rb["seeds"], "source": rb.get("source")}}}
+    data = _load(_Sums(res), None, [("a", metric, False), ("b", metric, False)])
+    if data is None:
+        raise ValueError(f"{metric}: a seed of {row_a!r} or {row_b!r} has no per-recording "
+                         "test data")
+    if paired_seeds:
+        data["keys"] = ["seeds", "seeds"]
+    return _test(data, lambda v: v[1] - v[0])

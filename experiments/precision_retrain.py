@@ -1,0 +1,153 @@
+#!/usr/bin/env python3
+"""Does ``--precision auto``'s choice change a table's numbers? One row of a table, trained
+again with the same seeds in float32, against the table's own runs (#36: "compiled/bf16
+choices never change a table's numbers beyond the stated tolerance, checked by re-training
+one row of each table both ways").
+
+The float32 runs come from the table's own command with the precision set and the row
+chosen, into another folder::
+
+    bsp-reproduce lifting --data data/medium-poses --seeds 5 --rows lstm \\
+        --set precision=32 --out runs-fp32
+    python experiments/precision_retrain.py --auto runs/lifting-quick \\
+        --fp32 runs-fp32/lifting-quick --row lstm --metric mpjpe_mm --margin 2% --out DIR
+
+Each call adds (or replaces) one row of ``DIR/precision_retrain.json`` and re-renders
+``DIR/precision_retrain.md``. The difference float32 - auto and its 95 % interval come from
+the tables' two-level bootstrap (t method; test recordings drawn jointly, the same seed
+numbers drawn together: a seed fixes the initial weights and the data order under both
+precisions; ``bsp_fast.reproduction.evidence.rerun_difference``). The verdict is the
+tables' equivalence test against ``--margin`` (absolute, or ``N%`` of the auto row's
+value): *agrees* when the whole interval lies within +-margin, *differs* when wholly
+outside, *undetermined* otherwise; a margin is to be stated before the float32 runs.
+
+The margins, stated before the first float32 run (2026-11-26): MPJPE 2 % and PCK 0.5
+percentage points (the bf16 tolerances on the same weights, docs/training.md), F1 0.02.
+Rows: classification lstm-perfect (f1, 0.02), lifting lstm (mpjpe_mm, 2%), autoencoder
+clean (pck_0.05, 0.005), pose_estimation pose_cnn (pck_0.05, 0.005), 5 seeds each.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+FILE = "precision_retrain"
+
+
+def _results(folder: Path) -> dict:
+    path = folder / "results.json"
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        sys.exit(f"precision_retrain: {path} does not exist (run bsp-reproduce first)")
+    except ValueError as e:
+        sys.exit(f"precision_retrain: {path}: not JSON ({e})")
+
+
+def _precisions(r: dict) -> list:
+    return sorted({str(s.get("precision")) for s in r["seeds"].values()})
+
+
+def _margin(text: str, value: float) -> float:
+    try:
+        return abs(value) * float(text[:-1]) / 100 if text.endswith("%") else float(text)
+    except ValueError:
+        sys.exit(f"precision_retrain: --margin must be a number or N%, got {text!r}")
+
+
+def compare(auto_dir: Path, fp32_dir: Path, row: str, metric: str, margin: str) -> dict:
+    from bsp_fast.metrics.uncertainty import equivalence
+    from bsp_fast.reproduction.evidence import rerun_difference
+
+    a, b = _results(auto_dir), _results(fp32_dir)
+    for name, res, folder in (("auto", a, auto_dir), ("fp32", b, fp32_dir)):
+        if row not in res["results"]:
+            sys.exit(f"precision_retrain: {folder / 'results.json'} has no row {row!r}")
+    ra, rb = a["results"][row], b["results"][row]
+    if _precisions(rb) != ["32"]:
+        sys.exit(f"precision_retrain: {fp32_dir}: row {row!r} ran in {_precisions(rb)}, "
+                 "not float32 (--set precision=32)")
+    test = rerun_difference(a, row, b, row, metric)
+    m = _margin(margin, ra["metrics"][metric])
+    return {"table": a.get("table"), "budget": a.get("budget"), "row": row,
+            "metric": metric, "seeds": [int(s) for s in ra["seeds"]],
+            "recordings": test.n, "auto_precision": _precisions(ra),
+            "auto": ra["metrics"][metric], "fp32": rb["metrics"][metric],
+            "auto_std": ra.get("std", {}).get(metric), "fp32_std": rb.get("std", {}).get(metric),
+            "difference": test.value, "interval": [test.low, test.high], "p": test.p,
+            "margin": m, "margin_given": margin,
+            "verdict": equivalence(test, 0.0, m),
+            "fit_cpu_min": {k: _cpu(r) for k, r in (("auto", ra), ("fp32", rb))},
+            "auto_runs": str(auto_dir), "fp32_runs": str(fp32_dir)}
+
+
+def _cpu(r: dict) -> float | None:
+    total = [s.get("seconds", {}).get("fit_cpu") for s in r["seeds"].values()]
+    return None if None in total else round(sum(total) / 60, 2)
+
+
+def render(rows: list) -> str:
+    def f(x, d=4):
+        return ("–" if x is None else "0" if x == 0 else f"{x:.{d}g}" if abs(x) >= 1e-3
+                else f"{x:.2e}")
+
+    lines = ["| table / row | metric | seeds | auto (precision) | float32 | float32 − auto "
+             "[95 % interval] | margin | verdict | fit CPU min auto / float32 |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lo, hi = r["interval"]
+        cpu = r["fit_cpu_min"]
+        lines.append(
+            f"| {r['table']} / {r['row']} | {r['metric']} | {len(r['seeds'])} | "
+            f"{f(r['auto'])} ± {f(r['auto_std'], 2)} ({', '.join(r['auto_precision'])}) | "
+            f"{f(r['fp32'])} ± {f(r['fp32_std'], 2)} | {r['difference']:+.4g} "
+            f"[{lo:+.4g}, {hi:+.4g}] | ±{f(r['margin'], 3)} ({r['margin_given']}) | "
+            f"{r['verdict']} | {f(cpu['auto'], 3)} / {f(cpu['fp32'], 3)} |")
+    return "\n".join(lines) + "\n"
+
+
+def _write(path: Path, text: str) -> None:
+    """Whole or not at all: a temporary file renamed over the old one."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        fh.write(text)
+    os.replace(tmp, path)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--auto", type=Path, required=True, help="the table's run folder "
+                   "(RUNS/TABLE-BUDGET, --precision auto)")
+    p.add_argument("--fp32", type=Path, required=True, help="the same row's float32 runs "
+                   "(RUNS32/TABLE-BUDGET)")
+    p.add_argument("--row", required=True)
+    p.add_argument("--metric", required=True)
+    p.add_argument("--margin", required=True, help="equivalence margin: absolute, or N%% of "
+                   "the auto row's value")
+    p.add_argument("--out", type=Path, required=True, help="folder of precision_retrain.json/.md")
+    a = p.parse_args(argv)
+    from bsp_fast.training.precision import cpu_summary
+
+    row = compare(a.auto, a.fp32, a.row, a.metric, a.margin)
+    row["command"] = " ".join(["python3", "experiments/precision_retrain.py",
+                               *(sys.argv[1:] if argv is None else argv)])
+    row["cpu"] = cpu_summary()  # where this script ran; the runs' CPU is in their logs
+    a.out.mkdir(parents=True, exist_ok=True)
+    path = a.out / f"{FILE}.json"
+    doc = json.loads(path.read_text(encoding="utf-8")) if path.exists() else {"rows": []}
+    rows = [r for r in doc["rows"] if (r["table"], r["row"], r["metric"]) !=
+            (row["table"], row["row"], row["metric"])] + [row]
+    doc = {"rows": rows}
+    _write(path, json.dumps(doc, indent=1) + "\n")
+    _write(a.out / f"{FILE}.md", render(rows))
+    print(render([row]), end="")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
