@@ -197,6 +197,25 @@ def test_classifier_ablation_smoke_writes_the_figures_and_fallback(data, tmp_pat
     assert marks["LSTM loses less F1 than PedestrianGraph at MJP 0.7187"] == "n/a"
 
 
+def test_classification_at_batch_1_is_the_classification_table_at_batch_1(data, tmp_path):
+    import yaml
+
+    b1, cls = load_table("classification_batch1"), load_table("classification")
+    for key in ("rows", "findings", "metrics", "common"):
+        assert b1[key] == cls[key]
+    # the original's batch 1 over the same 40 epochs and patience: 804 updates per epoch
+    assert b1["budgets"]["quick"] == dict(cls["budgets"]["quick"], batch_size=1,
+                                          max_steps=40 * 804)
+    assert R.main(["classification_batch1", "--data", str(data["bench"]), "--budget",
+                   "smoke", "--seeds", "1", "--rows", "lstm-perfect,graph-perfect",
+                   "--out", str(tmp_path)]) == 0
+    base = tmp_path / "classification_batch1-smoke"
+    for cfg in (base / "configs").glob("*.yaml"):
+        assert yaml.safe_load(cfg.read_text())["batch_size"] == 1
+    saved = json.loads((base / "results.json").read_text())
+    assert sorted(saved["results"]) == ["graph-perfect", "lstm-perfect"]
+
+
 def test_relative_rot_ablation_reads_each_rows_dataset(data, tmp_path, capsys):
     rows = "relrot,relrot-direct-bones5,lstm-motion"
     assert _smoke("ablation_relative_rot", data["lifting"], tmp_path, rows) == 0

@@ -124,3 +124,29 @@ def test_precision_retrain_difference_by_hand_and_verdicts(tmp_path):
     assert "| lifting / lstm | mpjpe_mm | 2 |" in (out / "precision_retrain.md").read_text()
     with pytest.raises(SystemExit, match="not float32"):
         pr.main([*args, "--fp32", str(auto), "--margin", "1"])
+
+
+def test_pose_decode_smoke_rescores_the_same_checkpoints(tmp_path):
+    from bsp_fast import reproduction as R
+    from bsp_fast.data.testing import write_clip_file
+
+    h5 = tmp_path / "media.h5"
+    write_clip_file(h5, clips=(16, 8, 8), clip_length=4, seed=4, media=True)
+    assert R.main(["pose_estimation", "--data", str(h5), "--budget", "smoke", "--out",
+                   str(tmp_path / "runs"), "--rows", "pose_temporal", "--seeds", "2",
+                   "--set", "crop_size=32", "--set", "hp={width: 4}",
+                   # no context frames in this file: no box jitter (nor noisy-box scores)
+                   "--set", "box_jitter_scale=0", "--set", "box_jitter_shift=0"]) == 0
+    pd = _load("pose_decode")
+    assert pd.main([str(tmp_path / "runs" / "pose_estimation-smoke"), "--out",
+                    str(tmp_path / "out")]) == 0
+    doc = json.loads((tmp_path / "out" / "pose_decode.json").read_text())
+    assert doc["seeds"] == ["22742", "22743"] and doc["reproduced_max_abs"] == 0.0
+    one = doc["summary"][0]
+    assert one["metric"] == "pck_0.05"
+    dark = [doc["per_seed"][s]["dark"]["metrics"]["pck_0.05"] for s in doc["seeds"]]
+    soft = [doc["per_seed"][s]["soft_argmax"]["metrics"]["pck_0.05"] for s in doc["seeds"]]
+    # the summary's values are the seeds' means of the two scorings
+    assert one["dark"] == pytest.approx(sum(dark) / 2)
+    assert one["difference"] == pytest.approx((sum(dark) - sum(soft)) / 2)
+    assert "| pck_0.05 |" in (tmp_path / "out" / "pose_decode.md").read_text()

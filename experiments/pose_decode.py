@@ -1,0 +1,135 @@
+#!/usr/bin/env python3
+"""Decoding ablation of pose_temporal on the same training (#38 item 4): each seed's best
+checkpoint scored on the test split with the soft-argmax it was trained and tabled with,
+and again with DARK (Taylor refinement of the predicted distribution's peak,
+``bsp_fast.models.pose_temporal.dark_decode``).
+
+pose_temporal's loss is the soft-argmax's whatever ``decode`` is, so the ablation table's
+``dark`` row (a training with ``hp: {decode: dark}``) would repeat these trainings step for
+step and pick the same checkpoints; scoring the table's own checkpoints twice answers it
+without training again. The soft-argmax scores must reproduce the runs' ``metrics.json``
+(checked, printed). Per metric: the difference DARK - soft-argmax over seeds and test
+recordings (the tables' two-level bootstrap, t method; the two decodings are the same runs,
+so seeds and recordings are drawn together).
+
+    python experiments/pose_decode.py RUNS/pose_estimation-quick --row pose_temporal \\
+        --out DIR
+
+Writes ``DIR/pose_decode.json`` and ``.md``, a seed at a time (``--resume`` keeps the
+seeds done).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+METRICS = ("pck_0.05", "pck_0.05_visible", "pck_0.05_occluded", "pck_0.05_hands",
+           "pck_0.05_feet", "pckhn_0.1")
+DECODES = ("soft_argmax", "dark")
+
+
+def _decode_callback(decode: str):
+    import lightning.pytorch as pl
+
+    class SetDecode(pl.Callback):
+        def on_test_start(self, trainer, pl_module):
+            pl_module.net.decode = decode
+
+    return SetDecode()
+
+
+def score(run: Path, decode: str) -> dict:
+    from bsp_fast.training.evaluate import evaluate
+
+    t = time.process_time()
+    res = evaluate(run, "test", callbacks=[_decode_callback(decode)])
+    return {"metrics": res.metrics, "per_recording": res.per_recording,
+            "cpu_s": round(time.process_time() - t, 1)}
+
+
+def summarise(seeds: dict) -> list:
+    import numpy as np
+
+    from bsp_fast.metrics import hierarchical as H
+    from bsp_fast.metrics import uncertainty as U
+
+    out = []
+    for m in METRICS:
+        rows = []
+        for decode in DECODES:
+            per = [seeds[s][decode]["per_recording"] for s in sorted(seeds)]
+            if any(m not in p["metrics"] for p in per):
+                break
+            pooled = [U.pool([p], m) for p in per]
+            recs = sorted({r for rs, _, _ in pooled for r in rs})
+            num, den = np.zeros((len(per), len(recs))), np.zeros((len(per), len(recs)))
+            for i, (rs, n, d) in enumerate(pooled):
+                idx = [recs.index(r) for r in rs]
+                num[i, idx], den[i, idx] = n, d
+            rows.append(H.Ratios(num, den))
+        if len(rows) < 2:
+            continue
+        value = [float(np.mean(H.row_values(r.num, r.den))) for r in rows]
+        t = H.two_level(rows, lambda v: v[1] - v[0], seed_keys=["runs", "runs"])
+        out.append({"metric": m, "soft_argmax": value[0], "dark": value[1],
+                    "difference": t.value, "interval": [t.low, t.high], "p": t.p,
+                    "seeds": len(seeds), "recordings": t.n})
+    return out
+
+
+def render(doc: dict) -> str:
+    lines = [f"pose_temporal's {len(doc['seeds'])} seeds ({', '.join(doc['seeds'])}) of "
+             f"`{doc['runs']}`, test split, the same checkpoints decoded two ways "
+             "(PCK in %; difference DARK − soft-argmax [95 % interval over seeds and "
+             "recordings, t method], two-sided p; soft-argmax reproduces metrics.json to "
+             f"{doc['reproduced_max_abs']:.1e}).", "",
+             "| metric | soft-argmax | DARK | DARK − soft-argmax | p |", "|---|---|---|---|---|"]
+    for r in doc["summary"]:
+        lo, hi = r["interval"]
+        lines.append(f"| {r['metric']} | {100 * r['soft_argmax']:.1f} | {100 * r['dark']:.1f} "
+                     f"| {100 * r['difference']:+.2f} [{100 * lo:+.2f}, {100 * hi:+.2f}] | "
+                     f"{r['p']:.3f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    from bsp_fast.atomic import write_text
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("runs", type=Path, help="a pose_estimation table's run folder")
+    p.add_argument("--row", default="pose_temporal")
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--resume", action="store_true")
+    a = p.parse_args(argv)
+    runs = sorted((a.runs / a.row).glob("seed-*"))
+    if not runs:
+        sys.exit(f"pose_decode: no {a.runs / a.row}/seed-* run folders")
+    a.out.mkdir(parents=True, exist_ok=True)
+    path = a.out / "pose_decode.json"
+    done = json.loads(path.read_text(encoding="utf-8"))["per_seed"] if (
+        a.resume and path.is_file()) else {}
+    worst = 0.0
+    for run in runs:
+        seed = run.name.split("-", 1)[1]
+        if seed not in done:
+            done[seed] = {d: score(run, d) for d in DECODES}
+        tabled = json.loads((run / "metrics.json").read_text(encoding="utf-8"))["test"]
+        worst = max([worst] + [abs(done[seed]["soft_argmax"]["metrics"][m] - tabled[m])
+                               for m in METRICS if m in tabled])
+        doc = {"runs": str(a.runs / a.row), "seeds": sorted(done), "per_seed": done,
+               "reproduced_max_abs": worst, "summary": summarise(done) if len(done) > 1
+               else [], "command": "python3 experiments/pose_decode.py " +
+               " ".join(sys.argv[1:] if argv is None else argv)}
+        write_text(path, json.dumps(doc, indent=1))
+        write_text(a.out / "pose_decode.md", render(doc))
+        print(f"seed {seed}: soft-argmax {done[seed]['soft_argmax']['metrics']['pck_0.05']:.4f} "
+              f"dark {done[seed]['dark']['metrics']['pck_0.05']:.4f}", flush=True)
+    print(render(doc), end="")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
