@@ -243,6 +243,26 @@ def run_curve(job: dict) -> str:
             bsp_fast.train(out=run, epochs=epochs, quiet=True, force=True, **opts)
 
 
+def _pool_map(fn, jobs: list, n: int) -> list:
+    """``pool.map`` over ``n`` processes where a SIGTERM sent to this process alone reaches
+    the workers too: each gets SIGTERM (bsp-train's: the run is saved to be resumed), the
+    jobs not started are dropped, and this process exits with 143 once they have ended."""
+    import signal
+
+    with ProcessPoolExecutor(n, mp_context=get_context("spawn")) as pool:
+        def stop(signum, frame):
+            for proc in list(pool._processes.values()):  # the running workers
+                proc.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise SystemExit(128 + signum)
+
+        old = signal.signal(signal.SIGTERM, stop)
+        try:
+            return list(pool.map(fn, jobs))
+        finally:
+            signal.signal(signal.SIGTERM, old)
+
+
 def configurations(args) -> dict:
     return {f"crop{s}-w{w}": {"crop_size": s, "width": w}
             for s in args.crop_sizes for w in args.widths}
@@ -278,8 +298,7 @@ def curves(args) -> int:
     if args.no_train:
         jobs = []
     if args.jobs > 1 and jobs:
-        with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
-            list(pool.map(run_curve, jobs))
+        _pool_map(run_curve, jobs, args.jobs)
     else:
         for job in jobs:
             run_curve(job)

@@ -132,19 +132,80 @@ def test_the_ablation_table_loads_with_one_budget_rule(tmp_path):
                                       "pckhn_0.1", "pck_0.05_noisy"}
 
 
-def test_smoke_curves_then_the_table_runs(tmp_path):
-    import bsp_fast
+@pytest.fixture(scope="module")
+def c32(tmp_path_factory):
     from bsp_fast import conversion as cv
-    from bsp_fast.reproduction.table_files import load_table
     from bsp_fast.synth import generate
 
-    generate(tmp_path / "ds", "sample", clips=3, frames=90, size="480x180", seed=2, workers=1,
+    root = tmp_path_factory.mktemp("pose_budget")
+    generate(root / "ds", "sample", clips=3, frames=90, size="480x180", seed=2, workers=1,
              progress=False)
-    h5 = tmp_path / "c32.h5"
+    h5 = root / "c32.h5"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # a tiny split's class counts
-        cv.convert(tmp_path / "ds", h5, clip_length=8, clip_offset=8, crop_size=32,
+        cv.convert(root / "ds", h5, clip_length=8, clip_offset=8, crop_size=32,
                    val_frac=0.3, test_frac=0.3, threads=1, crop_context=1.25)
+    return h5
+
+
+def _children(pid: int) -> list:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _gone(pid: int) -> bool:
+    try:
+        state = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return True
+    return state == "Z"
+
+
+def test_sigterm_to_the_curves_parent_alone_stops_its_workers(c32, tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    proc = subprocess.Popen([sys.executable, str(ROOT / "experiments" / "pose_estimation_budget.py"),
+                             "curves", "--data", str(c32), "--out", str(tmp_path / "out"),
+                             "--crop-sizes", "32", "--widths", "4", "--seeds", "2",
+                             "--jobs", "2", "--max-epochs", "50"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        workers = []
+        while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            # the pool's two workers (spawned interpreters), not its resource tracker
+            workers = [c for c in _children(proc.pid) if "spawn_main" in
+                       (Path("/proc") / str(c) / "cmdline").read_bytes().decode(errors="replace")]
+            time.sleep(0.1)
+        assert len(workers) == 2, proc.stderr.read().decode()[-2000:]
+        os.kill(proc.pid, signal.SIGTERM)  # the parent only, as a scheduler may do
+        assert proc.wait(timeout=120) == 143
+        deadline = time.monotonic() + 30
+        while not all(_gone(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert all(_gone(w) for w in workers)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_smoke_curves_then_the_table_runs(c32, tmp_path):
+    import bsp_fast
+    from bsp_fast.reproduction.table_files import load_table
+
+    h5 = c32
     out = tmp_path / "out"
     assert pb.main(["curves", "--data", str(h5), "--out", str(out), "--smoke",
                     "--crop-sizes", "32"]) == 0
