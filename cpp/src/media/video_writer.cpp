@@ -23,11 +23,6 @@ const AVOutputFormat* guess_format(const std::string& path) {
   return f ? f : av_guess_format("mp4", nullptr, nullptr);
 }
 
-// x264's instruction sets for this CPU, AVX-512 left out. Debian's x264 (0.164.3095) gives
-// different bytes for the same frames from one run to the next with its AVX-512 code (4 of
-// 40 identical writes in one process on an avx512 EPYC, a dataset that bsp-synth made twice
-// differed in one MP4); up to AVX2 it gave 64 of 64 identical files, the same bytes as its
-// usual output there. Only sets the CPU has are named: x264 trusts the list.
 // The rows' padding past the picture, which swscale leaves unwritten and x264 may read, is
 // zero rather than whatever the allocator held.
 void zero(AVFrame* f) {
@@ -35,6 +30,11 @@ void zero(AVFrame* f) {
     if (b) std::memset(b->data, 0, b->size);
 }
 
+// x264's instruction sets for this CPU, AVX-512 left out. Debian's x264 (0.164.3095) gives
+// different bytes for the same frames from one run to the next with its AVX-512 code (4 of
+// 40 identical writes in one process on an avx512 EPYC, a dataset that bsp-synth made twice
+// differed in one MP4); up to AVX2 it gave 64 of 64 identical files, the same bytes as its
+// usual output there. Only sets the CPU has are named: x264 trusts the list.
 std::string x264_asm() {
   const int f = av_get_cpu_flags();
   static const std::pair<int, const char*> sets[] = {
