@@ -69,24 +69,30 @@ def _plan(tab, data, budget, base: Path, wanted, seeds, split_seeds, overrides, 
     """``[(row, seed, run_dir, opts)]``; ``seeds`` None: one run per row in ``ROW/`` with
     the options' own seed (the single-run table)."""
     plan = []
-    for row in tab["rows"]:
-        if row["name"] not in wanted or row.get("initial_of"):
-            continue
-        for seed in row_seeds(row, seeds, budget) or [None]:
-            extra = dict(overrides or {})
-            run_dir = base / row["name"]
-            if seed is not None:
-                run_dir = run_dir / f"seed-{seed}"
-                extra["seed"] = seed
-                if split_seeds:
-                    extra["split_seed"] = seed
-            if threads:
-                extra["threads"] = threads
-            opts = row_options(tab, row, budget, data, run_dir, extra)
-            C.validate(C.defaults() | opts)  # unknown models / hyper-parameters fail first
-            opts = prepare_row_data(tab, row, opts, convert=convert)
-            plan.append((row, seed, run_dir, opts))
+    for row, seed, name in _runs(tab, wanted, seeds, budget):
+        extra = dict(overrides or {})
+        run_dir = base / name
+        if seed is not None:
+            extra["seed"] = seed
+            if split_seeds:
+                extra["split_seed"] = seed
+        if threads:
+            extra["threads"] = threads
+        opts = row_options(tab, row, budget, data, run_dir, extra)
+        C.validate(C.defaults() | opts)  # unknown models / hyper-parameters fail first
+        opts = prepare_row_data(tab, row, opts, convert=convert)
+        plan.append((row, seed, run_dir, opts))
     return plan
+
+
+def _runs(tab, wanted, seeds, budget: str):
+    """``(row, seed, name)`` of each run of the ``wanted`` rows (an ``initial_of`` row has
+    none): ``name`` is ``ROW`` (one run, seed None) or ``ROW/seed-S``, as the run folders
+    and the protocol ledger name them."""
+    for row in tab["rows"]:
+        if row["name"] in wanted and not row.get("initial_of"):
+            for seed in row_seeds(row, seeds, budget) or [None]:
+                yield row, seed, row["name"] if seed is None else f"{row['name']}/seed-{seed}"
 
 
 def _convert_once(plan) -> None:
@@ -234,13 +240,7 @@ def _run(todo, jobs: int, quiet: bool, log) -> None:
 def _run_names(tab, wanted, seeds, base: Path, budget: str) -> dict:
     """``{name: run_dir}`` of the runs of ``wanted`` rows: name ``ROW`` (one seed) or
     ``ROW/seed-S``, as the protocol ledger records them."""
-    out = {}
-    for row in tab["rows"]:
-        if row["name"] in wanted and not row.get("initial_of"):
-            for seed in row_seeds(row, seeds, budget) or [None]:
-                name = row["name"] if seed is None else f"{row['name']}/seed-{seed}"
-                out[name] = base / name
-    return out
+    return {name: base / name for _, _, name in _runs(tab, wanted, seeds, budget)}
 
 
 def _seed_result(run_dir: Path) -> dict:
