@@ -81,8 +81,9 @@ def summarise(seeds: dict) -> list:
 
 
 def render(doc: dict) -> str:
+    runs = Path(doc["runs"])
     lines = [f"pose_temporal's {len(doc['seeds'])} seeds ({', '.join(doc['seeds'])}) of "
-             f"`{doc['runs']}`, test split, the same checkpoints decoded two ways "
+             f"`{runs.parent.name}/{runs.name}`, test split, the same checkpoints decoded two ways "
              "(PCK in %; difference DARK − soft-argmax [95 % interval over seeds and "
              "recordings, t method], two-sided p; soft-argmax reproduces metrics.json to "
              f"{doc['reproduced_max_abs']:.1e}).", "",
