@@ -150,3 +150,21 @@ def test_pose_decode_smoke_rescores_the_same_checkpoints(tmp_path):
     assert one["dark"] == pytest.approx(sum(dark) / 2)
     assert one["difference"] == pytest.approx((sum(dark) - sum(soft)) / 2)
     assert "| pck_0.05 |" in (tmp_path / "out" / "pose_decode.md").read_text()
+
+
+def test_cross_table_difference_by_hand_with_holm(tmp_path):
+    ct = _load("cross_table")
+    a = _fake_results(tmp_path / "a", "32", {1: [10.0, 40.0, 30.0], 2: [12.0, 36.0, 33.0]})
+    b = _fake_results(tmp_path / "b", "32", {1: [15.0, 50.0, 35.0], 2: [17.0, 46.0, 38.0]})
+    out = tmp_path / "out"
+    assert ct.main(["--a", str(a), "--b", str(b), "--rows", "lstm", "--metric", "mpjpe_mm",
+                    "--out", str(out)]) == 0
+    (row,) = json.loads((out / "cross_table.json").read_text())["rows"]
+    # a: (20 + 20.25) / 2; b: (25 + 25.25) / 2; the seeds drawn apart: an interval around +5
+    assert row["difference"] == pytest.approx(5.0) and row["seeds"] == [2, 2]
+    lo, hi = row["interval"]
+    assert lo < 5.0 < hi and row["p_holm"] == row["p"]  # a family of one
+    assert "| lstm | mpjpe_mm | 20.125 (lifting, 2 seeds) |" in (out / "cross_table.md").read_text()
+    with pytest.raises(SystemExit, match="no row 'gru'"):
+        ct.main(["--a", str(a), "--b", str(b), "--rows", "gru", "--metric", "mpjpe_mm",
+                 "--out", str(out)])
