@@ -68,6 +68,7 @@ def render(rows: list) -> str:
 
 def main(argv=None) -> int:
     from bsp_fast.atomic import write_text
+    from bsp_fast.reproduction.readme import portable_command
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--a", type=Path, required=True, help="one table's run folder")
@@ -77,8 +78,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, required=True)
     a = p.parse_args(argv)
     rows = compare(a.a, a.b, [r for r in a.rows.split(",") if r], a.metric)
-    command = " ".join(["python3", "experiments/cross_table.py",
-                        *(sys.argv[1:] if argv is None else argv)])
+    command = portable_command("experiments/cross_table.py",
+                               sys.argv[1:] if argv is None else argv)
     for r in rows:
         r["command"] = command
     a.out.mkdir(parents=True, exist_ok=True)

@@ -81,9 +81,8 @@ def summarise(seeds: dict) -> list:
 
 
 def render(doc: dict) -> str:
-    runs = Path(doc["runs"])
     lines = [f"pose_temporal's {len(doc['seeds'])} seeds ({', '.join(doc['seeds'])}) of "
-             f"`{runs.parent.name}/{runs.name}`, test split, the same checkpoints decoded two ways "
+             f"`{doc['runs']}`, test split, the same checkpoints decoded two ways "
              "(PCK in %; difference DARK − soft-argmax [95 % interval over seeds and "
              "recordings, t method], two-sided p; soft-argmax reproduces metrics.json to "
              f"{doc['reproduced_max_abs']:.1e}).", "",
@@ -98,6 +97,7 @@ def render(doc: dict) -> str:
 
 def main(argv=None) -> int:
     from bsp_fast.atomic import write_text
+    from bsp_fast.reproduction.readme import portable, portable_command
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("runs", type=Path, help="a pose_estimation table's run folder")
@@ -120,10 +120,11 @@ def main(argv=None) -> int:
         tabled = json.loads((run / "metrics.json").read_text(encoding="utf-8"))["test"]
         worst = max([worst] + [abs(done[seed]["soft_argmax"]["metrics"][m] - tabled[m])
                                for m in METRICS if m in tabled])
-        doc = {"runs": str(a.runs / a.row), "seeds": sorted(done), "per_seed": done,
-               "reproduced_max_abs": worst, "summary": summarise(done) if len(done) > 1
-               else [], "command": "python3 experiments/pose_decode.py " +
-               " ".join(sys.argv[1:] if argv is None else argv)}
+        doc = {"runs": f"{portable(a.runs)}/{a.row}", "seeds": sorted(done),
+               "per_seed": done, "reproduced_max_abs": worst,
+               "summary": summarise(done) if len(done) > 1 else [],
+               "command": portable_command("experiments/pose_decode.py",
+                                           sys.argv[1:] if argv is None else argv)}
         write_text(path, json.dumps(doc, indent=1))
         write_text(a.out / "pose_decode.md", render(doc))
         print(f"seed {seed}: soft-argmax {done[seed]['soft_argmax']['metrics']['pck_0.05']:.4f} "

@@ -62,6 +62,7 @@ def _margin(text: str, value: float) -> float:
 def compare(auto_dir: Path, fp32_dir: Path, row: str, metric: str, margin: str) -> dict:
     from bsp_fast.metrics.uncertainty import equivalence
     from bsp_fast.reproduction.evidence import rerun_difference
+    from bsp_fast.reproduction.readme import portable
 
     a, b = _results(auto_dir), _results(fp32_dir)
     for name, res, folder in (("auto", a, auto_dir), ("fp32", b, fp32_dir)):
@@ -82,7 +83,7 @@ def compare(auto_dir: Path, fp32_dir: Path, row: str, metric: str, margin: str) 
             "margin": m, "margin_given": margin,
             "verdict": equivalence(test, 0.0, m),
             "fit_cpu_min": {k: _cpu(r) for k, r in (("auto", ra), ("fp32", rb))},
-            "auto_runs": str(auto_dir), "fp32_runs": str(fp32_dir)}
+            "auto_runs": portable(auto_dir), "fp32_runs": portable(fp32_dir)}
 
 
 def _cpu(r: dict) -> float | None:
@@ -131,11 +132,12 @@ def main(argv=None) -> int:
                    "the auto row's value")
     p.add_argument("--out", type=Path, required=True, help="folder of precision_retrain.json/.md")
     a = p.parse_args(argv)
+    from bsp_fast.reproduction.readme import portable_command
     from bsp_fast.training.precision import cpu_summary
 
     row = compare(a.auto, a.fp32, a.row, a.metric, a.margin)
-    row["command"] = " ".join(["python3", "experiments/precision_retrain.py",
-                               *(sys.argv[1:] if argv is None else argv)])
+    row["command"] = portable_command("experiments/precision_retrain.py",
+                                      sys.argv[1:] if argv is None else argv)
     row["cpu"] = cpu_summary()  # where this script ran; the runs' CPU is in their logs
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / f"{FILE}.json"

@@ -110,6 +110,8 @@ def test_precision_retrain_difference_by_hand_and_verdicts(tmp_path):
     assert row["auto"] == pytest.approx(20.125) and row["difference"] == 0.0
     assert row["margin"] == pytest.approx(0.4025) and row["verdict"] == "agrees"
     assert row["fit_cpu_min"] == {"auto": 1.0, "fp32": 1.0}
+    # no machine's paths in a published file: folders outside the repository by name
+    assert row["auto_runs"] == "auto" and str(tmp_path) not in row["command"]
     assert pr.main([*args, "--fp32", str(noisy), "--margin", "2%"]) == 0
     rows = json.loads((out / "precision_retrain.json").read_text())["rows"]
     assert len(rows) == 1  # the same table, row and metric: replaced
@@ -164,6 +166,7 @@ def test_cross_table_difference_by_hand_with_holm(tmp_path):
     assert row["difference"] == pytest.approx(5.0) and row["seeds"] == [2, 2]
     lo, hi = row["interval"]
     assert lo < 5.0 < hi and row["p_holm"] == row["p"]  # a family of one
+    assert row["command"].startswith("python3 experiments/cross_table.py --a a --b b ")
     assert "| lstm | mpjpe_mm | 20.125 (lifting, 2 seeds) |" in (out / "cross_table.md").read_text()
     with pytest.raises(SystemExit, match="no row 'gru'"):
         ct.main(["--a", str(a), "--b", str(b), "--rows", "gru", "--metric", "mpjpe_mm",

@@ -41,6 +41,26 @@ def published_path(results_dir, table: str, budget: str) -> Path:
     return Path(results_dir) / f"{table}-{budget}.json"
 
 
+def portable(path) -> str:
+    """``path`` as a published file names it: relative to the working directory (the
+    repository the experiments run from) when inside it, else its last component (a
+    run folder's ``TABLE-BUDGET``), never this machine's absolute path."""
+    p = Path(path)
+    try:
+        return str(p.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return p.name
+
+
+def portable_command(script: str, argv) -> str:
+    """The command line of an ``experiments/`` script with its path arguments (existing
+    or absolute ones) :func:`portable`."""
+    import os
+
+    return " ".join(["python3", script, *(portable(a) if os.path.isabs(a) or
+                                          os.path.exists(a) else a for a in argv)])
+
+
 def _rel(path, base: Path):
     """``path`` relative to the table's run folder (a published file names no machine's
     paths)."""
