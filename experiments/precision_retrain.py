@@ -30,9 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 FILE = "precision_retrain"
@@ -65,7 +63,7 @@ def compare(auto_dir: Path, fp32_dir: Path, row: str, metric: str, margin: str) 
     from bsp_fast.reproduction.readme import portable
 
     a, b = _results(auto_dir), _results(fp32_dir)
-    for name, res, folder in (("auto", a, auto_dir), ("fp32", b, fp32_dir)):
+    for res, folder in ((a, auto_dir), (b, fp32_dir)):
         if row not in res["results"]:
             sys.exit(f"precision_retrain: {folder / 'results.json'} has no row {row!r}")
     ra, rb = a["results"][row], b["results"][row]
@@ -111,14 +109,6 @@ def render(rows: list) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _write(path: Path, text: str) -> None:
-    """Whole or not at all: a temporary file renamed over the old one."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
-
-
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -132,6 +122,7 @@ def main(argv=None) -> int:
                    "the auto row's value")
     p.add_argument("--out", type=Path, required=True, help="folder of precision_retrain.json/.md")
     a = p.parse_args(argv)
+    from bsp_fast.atomic import write_text
     from bsp_fast.reproduction.readme import portable_command
     from bsp_fast.training.precision import cpu_summary
 
@@ -145,8 +136,8 @@ def main(argv=None) -> int:
     rows = [r for r in doc["rows"] if (r["table"], r["row"], r["metric"]) !=
             (row["table"], row["row"], row["metric"])] + [row]
     doc = {"rows": rows}
-    _write(path, json.dumps(doc, indent=1) + "\n")
-    _write(a.out / f"{FILE}.md", render(rows))
+    write_text(path, json.dumps(doc, indent=1) + "\n")
+    write_text(a.out / f"{FILE}.md", render(rows))
     print(render([row]), end="")
     return 0
 
