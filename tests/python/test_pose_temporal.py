@@ -374,3 +374,39 @@ def test_image_augment_option_reaches_the_train_split_only(media_h5):
     train, val = dm.datasets["train"], dm.datasets["val"]
     assert train.augment and train._augment.rotation == 20.0
     assert not val.augment
+
+
+# ---------------------------------------------------------------------- learning rate
+def test_cosine_schedule_by_hand_and_constant_has_none():
+    assert "lr_scheduler" not in create(width=4).configure_optimizers(total_steps=10)
+    m = create(width=4, lr_schedule="cosine")
+    conf = m.configure_optimizers(lr=1e-3, total_steps=4)
+    opt, sched = conf["optimizer"], conf["lr_scheduler"]["scheduler"]
+    assert conf["lr_scheduler"]["interval"] == "step"
+    rates = []
+    for _ in range(5):
+        rates.append(opt.param_groups[0]["lr"])
+        opt.step()
+        sched.step()
+    # 1e-3 * (1 + cos(pi k / 4)) / 2 for k = 0..4
+    np.testing.assert_allclose(rates, [1e-3, 8.5355339e-4, 5e-4, 1.4644661e-4, 0.0], atol=1e-12)
+    with pytest.raises(ValueError, match="lr_schedule='cosine' ends with the run's budget"):
+        m.configure_optimizers(total_steps=None)
+    with pytest.raises(ValueError, match="lr_schedule"):
+        create(width=4, lr_schedule="step")
+
+
+def test_cosine_schedule_ends_with_the_runs_budget_in_bsp_train(media_h5, tmp_path):
+    import bsp_fast
+
+    out = tmp_path / "run"
+    bsp_fast.train("pose_estimation", "pose_temporal", data=media_h5, out=out, epochs=3,
+                   max_steps=7, batch_size=4, crop_size=32, accelerator="cpu", precision="32",
+                   threads=1, early_stop=0, seed=3, hp={"width": 4, "depth": 3,
+                                                        "lr_schedule": "cosine"})
+    ck = torch.load(out / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False)
+    # 20 train clips at batch 4: 5 updates an epoch, so max_steps (7) ends the run
+    assert ck["global_step"] == 7
+    (state,) = ck["lr_schedulers"]
+    assert state["T_max"] == 7 and state["last_epoch"] == 7
+    assert ck["optimizer_states"][0]["param_groups"][0]["lr"] == pytest.approx(0.0, abs=1e-12)

@@ -129,18 +129,21 @@ class BaseModel(nn.Module):
         """The report's training loss of this model for a batch dict."""
         raise NotImplementedError
 
-    def scheduler(self, optimizer):
-        """``(scheduler, "epoch" | "step")`` or ``(None, "epoch")``."""
+    def scheduler(self, optimizer, total_steps: int | None = None):
+        """``(scheduler, "epoch" | "step")`` or ``(None, "epoch")``; ``total_steps``: the
+        run's optimiser updates, for schedules that end with the budget (None: unknown)."""
         return None, "epoch"
 
-    def configure_optimizers(self, lr: float | None = None) -> dict:
+    def configure_optimizers(self, lr: float | None = None,
+                             total_steps: int | None = None) -> dict:
         """The report's defaults in Lightning's format: ``{"optimizer": AdamW}``, plus
         ``"lr_scheduler": {"scheduler": ..., "interval": "epoch" | "step"}`` when the
         model has a scheduler (a ``LightningModule.configure_optimizers`` can return it
-        as is)."""
+        as is). ``total_steps``: the run's optimiser updates (``bsp-train`` passes
+        Lightning's estimate: ``max_steps`` or epochs x batches, whichever ends first)."""
         opt = torch.optim.AdamW(self.parameters(), lr=self.default_lr if lr is None else lr,
                                 weight_decay=self.default_weight_decay)
-        sched, interval = self.scheduler(opt)
+        sched, interval = self.scheduler(opt, total_steps)
         if sched is None:
             return {"optimizer": opt}
         return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "interval": interval}}

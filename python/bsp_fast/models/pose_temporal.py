@@ -36,6 +36,7 @@ DECODES = ("soft_argmax", "dark")
 LOSSES = ("integral", "heatmap")
 TEMPORAL = ("conv", "none")
 NORMS = ("group", "batch")
+LR_SCHEDULES = ("constant", "cosine")
 _MEAN, _STD = 0.45, 0.25  # as pose_cnn: crops scaled to [0, 1], then (x - mean) / std
 
 
@@ -178,6 +179,8 @@ class PoseTemporal(PoseEstimationModel):
     the encoder's feature map of that scale added, a residual block; a 1x1 convolution to
     26 heatmaps at S/2. ``norm``: GroupNorm (default: per frame, so training and evaluation
     compute the same function and frames of a batch never mix) or BatchNorm.
+    ``lr_schedule``: ``constant`` (AdamW at its rate throughout) or ``cosine`` (per update,
+    from the rate to 0 at the run's last update: ``CosineAnnealingLR`` over the budget).
     """
 
     default_lr = 1e-3  # Adam's usual rate for heatmap nets trained from scratch
@@ -185,7 +188,7 @@ class PoseTemporal(PoseEstimationModel):
     def __init__(self, *, width: int = 16, depth: int = 4, temporal: str = "conv",
                  temporal_kernel: int = 5, decode: str = "soft_argmax",
                  loss: str = "integral", sigma: float = 1.5, occluded_weight: float = 1.0,
-                 norm: str = "group"):
+                 norm: str = "group", lr_schedule: str = "constant"):
         super().__init__(locals())
         check_int("width", width)
         check_int("depth", depth, minimum=2)
@@ -201,6 +204,8 @@ class PoseTemporal(PoseEstimationModel):
         check_float("sigma", sigma, 0.25, 8.0)
         check_float("occluded_weight", occluded_weight, 0.0, 1.0)
         check_choice("norm", norm, NORMS)
+        check_choice("lr_schedule", lr_schedule, LR_SCHEDULES)
+        self.lr_schedule = lr_schedule
         self.depth, self.sigma = depth, float(sigma)
         self.decode, self.loss_kind = decode, loss
         self.occluded_weight = float(occluded_weight)
@@ -224,6 +229,16 @@ class PoseTemporal(PoseEstimationModel):
         # copies and pickles leave out the latest forward's tensors (deepcopy refuses
         # non-leaf tensors, e.g. the precision probe's copy after a training step)
         return dict(self.__dict__, _last=None)
+
+    def scheduler(self, optimizer, total_steps=None):
+        if self.lr_schedule == "constant":
+            return None, "epoch"
+        if not total_steps or total_steps < 1:
+            raise ValueError(f"{self.name}: lr_schedule='cosine' ends with the run's budget, "
+                             f"which is not known here (total_steps={total_steps!r}): give "
+                             "max_steps or a number of epochs")
+        return torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=int(total_steps)), \
+            "step"
 
     # ----------------------------------------------------------------- forward
     def heatmaps(self, inputs: torch.Tensor) -> torch.Tensor:

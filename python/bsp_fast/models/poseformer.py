@@ -147,5 +147,5 @@ class PoseFormer(LiftingModel):
         t = self.weighted_mean(self.temporal_norm(t))  # (B*L, 1, d)
         return self.head(t).view(B, L, J, 3)
 
-    def scheduler(self, optimizer):
+    def scheduler(self, optimizer, total_steps=None):
         return torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=0.99), "epoch"

@@ -78,7 +78,7 @@ class SimpleTransformer(AutoencoderModel):
             tokens = tokens + sinusoidal_encoding(L, D_MODEL, tokens.device, tokens.dtype)
         return self.encoder(tokens).view(B, L, J, 2)
 
-    def scheduler(self, optimizer):
+    def scheduler(self, optimizer, total_steps=None):
         return (torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(optimizer, T_0=30,
                                                                      eta_min=1e-8), "epoch")
 

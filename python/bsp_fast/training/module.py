@@ -177,7 +177,11 @@ class TaskModule(pl.LightningModule):
     # ------------------------------------------------------------------ optimiser
     def configure_optimizers(self):
         """The model's report defaults (AdamW, its scheduler) in Lightning's format."""
-        return self.net.configure_optimizers(lr=self.hparams.lr)
+        try:  # the run's updates (max_steps or epochs x batches), for budget-long schedules
+            total = int(self.trainer.estimated_stepping_batches)
+        except (RuntimeError, ValueError, OverflowError):  # no trainer, or an endless run
+            total = None
+        return self.net.configure_optimizers(lr=self.hparams.lr, total_steps=total)
 
 
 class ClassificationTask(TaskModule):
