@@ -17,7 +17,11 @@ losses must agree within float32 / bf16 rounding). ``bsp-train`` runs with the t
 options (``--precision`` as given, one thread, validation every epoch, checkpoints,
 early stopping, CSV logs); its ratio to the plain loop at the same precision is item 3's
 number. ``project_quick_s`` gives a quick-budget run's training seconds per mode:
-first update + the budget's updates x the steady seconds per update.
+first update + the budget's updates x the steady seconds per update. ``--repeat N`` trains
+N runs per process, one after the other (a ``bsp-reproduce`` worker trains a table's
+seeds so, paying the imports once); ``cpu_s`` is the process's CPU seconds, imports
+included, which unlike wall time does not depend on the share of the cores a process got
+on a loaded machine.
 """
 from __future__ import annotations
 
@@ -114,8 +118,17 @@ def _bsp_train(job) -> dict:
             "val_loss": float(res.val.get("loss", float("nan"))), "seconds": res.seconds}
 
 
-def _run(job):
-    return (_bsp_train if job[4].startswith("bsp_train") else _plain)(job)
+def _run(job, repeat: int = 1):
+    """The job ``repeat`` times in this process (``--repeat``: a table's seeds as one
+    ``bsp-reproduce`` worker trains them, imports paid once); the first run's timings,
+    ``total_s`` the whole process's seconds until the last run ended."""
+    fn = _bsp_train if job[4].startswith("bsp_train") else _plain
+    first = fn(job)
+    for _ in range(repeat - 1):
+        fn(job)
+    # CPU seconds of the whole process (imports included): under load, where wall time
+    # depends on the share of the cores a process got, the comparable number
+    return dict(first, total_s=time.time() - job[5], repeat=repeat, cpu_s=time.process_time())
 
 
 def main(argv=None) -> int:
@@ -127,6 +140,9 @@ def main(argv=None) -> int:
     p.add_argument("--updates", type=int, default=0,
                    help="optimiser updates per run (0: --epochs whole epochs); with "
                         "--train-clips 1152 and --updates 500 a run is a quick-budget run")
+    p.add_argument("--repeat", type=int, default=1,
+                   help="runs per process (a bsp-reproduce worker trains a table's seeds "
+                        "one after the other in one process): imports are paid once")
     p.add_argument("--json", help="append one JSON line per (model, mode) to this file")
     args = p.parse_args(argv)
     from bsp_fast.data.testing import write_clip_file
@@ -142,7 +158,8 @@ def main(argv=None) -> int:
     tmp = tempfile.mkdtemp(prefix="bench_train_loop_")
     ctx = mp.get_context("spawn")
     print("| model | batch | mode | clips/s (steady) | first update s | fit s | process s | "
-          "val loss | quick-budget train s (projected) |\n|---|---|---|---|---|---|---|---|---|")
+          "process CPU s | val loss | quick-budget train s (projected) |\n"
+          "|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     for name, batch, length, quick_updates in MODELS:
         if name not in args.models:
@@ -155,13 +172,15 @@ def main(argv=None) -> int:
             with ctx.Pool(1) as pool:  # a fresh process: imports and start-up counted
                 steps = -(-n // batch)
                 epochs = -(-args.updates // steps) if args.updates else args.epochs
-                r = pool.apply(_run, ((name, batch, h5, epochs, mode, time.time(), args.updates),))
+                r = pool.apply(_run, ((name, batch, h5, epochs, mode, time.time(), args.updates),
+                                      args.repeat))
             r.update(model=name, batch=batch, mode=mode, load=os.getloadavg()[0])
             if "step_s" in r:
                 r["project_quick_s"] = r["first_s"] + (quick_updates - 1) * r["step_s"]
             rows.append(r)
             print(f"| {name} | {batch} | {mode} | {r.get('clips_per_s', float('nan')):,.0f} | "
                   f"{r.get('first_s', float('nan')):.2f} | {r['fit_s']:.1f} | {r['total_s']:.1f} | "
+                  f"{r['cpu_s']:.1f} | "
                   f"{r['val_loss']:.5f} | {r.get('project_quick_s', float('nan')):.0f} |",
                   flush=True)
             if args.json:

@@ -53,9 +53,12 @@ def test_bench_train_loop_smoke(capsys, monkeypatch, tmp_path):
     out = tmp_path / "rows.jsonl"
     assert bench.main(["--models", "lifting/lstm", "--train-clips", "64", "--epochs", "1",
                        "--updates", "3", "--modes", "eager32", "bsp_train32",
-                       "--json", str(out)]) == 0
+                       "--repeat", "2", "--json", str(out)]) == 0
     rows = [json.loads(line) for line in out.read_text().splitlines()]
     assert [r["mode"] for r in rows] == ["eager32", "bsp_train32"]
     assert rows[0]["updates"] == 3 and rows[0]["clips_per_s"] > 0
+    # two runs in one process: the process outlasts the first run's fit by a second one
+    assert [r["repeat"] for r in rows] == [2, 2] and all(r["cpu_s"] > 0 for r in rows)
+    assert rows[0]["total_s"] > 2 * rows[0]["fit_s"] > 0
     assert rows[1]["total_s"] >= rows[1]["fit_s"] > 0
     assert "| lifting/lstm | 64 | eager32 |" in capsys.readouterr().out
