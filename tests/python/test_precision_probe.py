@@ -82,6 +82,42 @@ def test_the_probe_leaves_the_runs_weights_and_random_state(tmp_path):
     assert torch.equal(state, torch.get_rng_state())
 
 
+def test_the_probe_alternates_the_precisions_and_times_cpu_with_one_thread(tmp_path,
+                                                                          monkeypatch):
+    import time
+
+    import torch
+
+    from bsp_fast import models
+    from bsp_fast.data import ClipDataset
+
+    h5 = tmp_path / "c.h5"
+    write_clip_file(h5, clips=(16, 4, 4), clip_length=8, seed=1)
+    batch = ClipDataset(h5, "train", "lifting")[list(range(8))]
+    net = models.create("lifting", "baseline_3d", linear_size=32, num_blocks=1)
+    seen = []
+    forward = type(net).forward_batch
+
+    def spy(self, b):
+        seen.append(torch.is_autocast_enabled("cpu"))
+        return forward(self, b)
+
+    monkeypatch.setattr(type(net), "forward_batch", spy)
+    threads = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        assert P.probe_clock() == (time.process_time, "CPU time")
+        probe = P.time_steps(net, batch, steps=3, warmup=2)
+        fp32 = probe(False)
+        # one call measured both: warm-up and timed steps alternate float32 and bf16
+        assert seen == [False, True] * 5
+        assert probe(True) > 0 and probe(False) == fp32 and len(seen) == 10
+        torch.set_num_threads(2)
+        assert P.probe_clock() == (time.perf_counter, "wall time")
+    finally:
+        torch.set_num_threads(threads)
+
+
 def test_a_run_records_what_auto_picked_and_why_and_bsp_eval_uses_it(probe_on, tmp_path):
     from bsp_fast.training.evaluate import evaluate
 

@@ -6,7 +6,8 @@ AVX512-BF16/AMX: bf16 is emulated there, measured 5-17x slower) it is float32 fo
 model. On a CPU with native bf16 it is decided per (model, CPU model, thread count, torch
 version) by a short timed probe of the run's own model on one of its own train batches:
 a few training steps (forward, loss, backward, optimiser step) in float32 and in bf16
-autocast, alternating, on copies of the network (the run's weights and random state are
+autocast, alternating, timed in CPU time with one thread (wall time with more), on copies
+of the network (the run's weights and random state are
 untouched); bf16-mixed when its median step is at least 10 % faster. The answer is cached
 in ``$XDG_CACHE_HOME/bsp_fast/precision.json`` (``~/.cache``; ``BSP_PRECISION_CACHE``
 names another file), so a machine decides once and every later run there agrees, and
@@ -25,7 +26,8 @@ import time
 from pathlib import Path
 
 __all__ = ["resolve_precision", "decide_precision", "native_bf16", "check_precision",
-           "probe_cache_path", "probe_key", "time_steps", "MARGIN", "cpu_flags", "cpu_summary"]
+           "probe_cache_path", "probe_key", "probe_clock", "time_steps", "MARGIN", "cpu_flags",
+           "cpu_summary"]
 
 #: the CPU flags that decide bf16's speed on a CPU, as benchmarks report them
 SPEED_FLAGS = ("avx2", "avx512f", "avx512_bf16", "amx_bf16", "amx_tile")
@@ -108,7 +110,10 @@ def probe_key(model_key: str, threads: int) -> str:
     model, the thread count and torch's version."""
     import torch
 
-    return f"{model_key} | {_cpu_name()} | {threads} thread(s) | torch {torch.__version__}"
+    # "probe 2": steps alternating and timed by probe_clock; answers of the first probe
+    # (each precision's steps in a row, wall time) are not reused
+    return (f"{model_key} | {_cpu_name()} | {threads} thread(s) | torch {torch.__version__}"
+            " | probe 2")
 
 
 def _read_cache(path: Path) -> dict:
@@ -143,8 +148,9 @@ def _probed_locked(path: Path, key: str, probe) -> tuple:
         return cached["precision"], cached.get("reason", "") + f" (cached in {path})"
     fp32, bf16 = probe(False), probe(True)
     pick = "bf16-mixed" if bf16 <= MARGIN * fp32 else "32"
-    reason = (f"auto: probe on this CPU, median step float32 {fp32 * 1e3:.1f} ms, bf16 "
-              f"{bf16 * 1e3:.1f} ms (x{fp32 / bf16:.2f}); bf16 needs x{1 / MARGIN:.2f}")
+    reason = (f"auto: probe on this CPU, median step ({probe_clock()[1]}) float32 "
+              f"{fp32 * 1e3:.1f} ms, bf16 {bf16 * 1e3:.1f} ms (x{fp32 / bf16:.2f}); bf16 "
+              f"needs x{1 / MARGIN:.2f}")
     try:  # a cache that cannot be written only costs the next run its probe
         from ..atomic import write_text
 
@@ -158,32 +164,65 @@ def _probed_locked(path: Path, key: str, probe) -> tuple:
     return pick, reason
 
 
+def probe_clock() -> tuple:
+    """``(clock, name)`` the probe times steps with: with one torch thread the process's CPU
+    time, which other processes sharing the cores barely change (a probe timed in wall
+    seconds beside two other trainings once measured bf16 at x0.84 of float32 for a
+    network measured at x1.33 on a quieter machine); with more threads wall time, since
+    their waiting is part of what a step costs."""
+    import torch
+
+    if torch.get_num_threads() == 1:
+        return time.process_time, "CPU time"
+    return time.perf_counter, "wall time"
+
+
 def time_steps(net, batch: dict, steps: int = _STEPS, warmup: int = _WARMUP):
     """A probe for :func:`decide_precision`: ``bf16 -> median seconds`` of training steps
-    (forward, loss, backward, SGD step) of a copy of ``net`` on ``batch``; the caller's
-    weights and random state are untouched."""
+    (forward, loss, backward, SGD step) of a copy of ``net`` on ``batch``, timed by
+    :func:`probe_clock`; the caller's weights and random state are untouched. The first
+    call measures both precisions, their steps alternating (float32, bf16, float32, ...),
+    so that a change of the machine's load during the probe falls on both alike; later
+    calls return those medians."""
     import copy
 
     import torch
 
+    clock = probe_clock()[0]
+
     def step(model, opt, bf16: bool) -> float:
-        t0 = time.perf_counter()
+        t0 = clock()
         with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
             loss = model.loss(model.forward_batch(batch), batch)
         opt.zero_grad(set_to_none=True)
         loss.float().backward()
         opt.step()
-        return time.perf_counter() - t0
+        return clock() - t0
+
+    medians: dict = {}
+
+    def measure() -> None:
+        with torch.random.fork_rng(devices=[]):
+            pairs = []
+            for bf16 in (False, True):  # a copy per precision: their caches stay apart
+                model = copy.deepcopy(net).train()
+                pairs.append((model, torch.optim.SGD(
+                    [p for p in model.parameters() if p.requires_grad], lr=0.0)))
+            firsts = [step(m, o, bf16) for (m, o), bf16 in zip(pairs, (False, True))]
+            # warm-up; a slow model (> 1 s a step) gets 1 warm-up step and 2 timed ones
+            n_warm, n = (1, min(steps, 2)) if max(firsts) > 1.0 else (warmup, steps)
+            times: dict = {False: [], True: []}
+            for k in range(n_warm - 1 + n):
+                for (m, o), bf16 in zip(pairs, (False, True)):
+                    t = step(m, o, bf16)
+                    if k >= n_warm - 1:
+                        times[bf16].append(t)
+            medians.update({b: statistics.median(v) for b, v in times.items()})
 
     def run(bf16: bool) -> float:
-        with torch.random.fork_rng(devices=[]):
-            model = copy.deepcopy(net).train()
-            opt = torch.optim.SGD([p for p in model.parameters() if p.requires_grad], lr=0.0)
-            first = step(model, opt, bf16)  # warm-up; a slow model (> 1 s) gets 1 + 2
-            n_warm, n = (1, min(steps, 2)) if first > 1.0 else (warmup, steps)
-            for _ in range(n_warm - 1):
-                step(model, opt, bf16)
-            return statistics.median(step(model, opt, bf16) for _ in range(n))
+        if not medians:
+            measure()
+        return medians[bool(bf16)]
     return run
 
 
