@@ -7,8 +7,8 @@ model. On a CPU with native bf16 it is decided per (model, CPU model, thread cou
 version) by a short timed probe of the run's own model on one of its own train batches:
 a few training steps (forward, loss, backward, optimiser step) in float32 and in bf16
 autocast, alternating, timed in CPU time with one thread (wall time with more), on copies
-of the network (the run's weights and random state are
-untouched); bf16-mixed when its median step is at least 10 % faster. The answer is cached
+of the network (the run's weights and random state are untouched); bf16-mixed when its
+median step is at least 10 % faster. The answer is cached
 in ``$XDG_CACHE_HOME/bsp_fast/precision.json`` (``~/.cache``; ``BSP_PRECISION_CACHE``
 names another file), so a machine decides once and every later run there agrees, and
 each run records what was picked and why in its ``config.yaml`` (``resolved:
