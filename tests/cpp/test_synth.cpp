@@ -14,6 +14,7 @@
 #include "bsp/synth/motion.hpp"
 #include "bsp/synth/render.hpp"
 #include "synth/render_internal.hpp"  // white-box: capsule hits, noise
+#include "testing.hpp"
 
 using namespace bsp;
 using namespace bsp::render;
@@ -48,13 +49,11 @@ Images background(const Scene& sc, const Camera& cam, int threads) {
   return im;
 }
 
-std::string temp_path(const char* name) {
-  return std::string(std::getenv("TMPDIR") ? std::getenv("TMPDIR") : "/tmp") + "/" + name;
-}
-
 // Root + one child; the child turns about Z by 0, 30, 60, 90 degrees over 4 frames at 10 fps.
-std::string write_bvh() {
-  const std::string path = temp_path("bsp_test_motion.bvh");
+// In the test case's own directory: ctest runs the cases as parallel processes, and one
+// case's clean-up must not delete the file another is reading (it did, with one /tmp name).
+std::string write_bvh(const bsp::testing::TempDir& tmp) {
+  const std::string path = tmp.path("motion.bvh");
   std::ofstream out(path);
   out << "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n"
          "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
@@ -213,7 +212,8 @@ TEST_CASE("bodies: tag 4 in front of the background, hidden behind nearer geomet
 }
 
 TEST_CASE("motion: BVH nodes, rest pose and sampled local transforms") {
-  const std::string path = write_bvh();
+  const bsp::testing::TempDir tmp("bsp_test_motion");
+  const std::string path = write_bvh(tmp);
   const bsp::Motion mo = bsp::load_motion(path, 20.0);  // resampled at twice the file's rate
   REQUIRE(mo.names.size() >= 2);
   CHECK(mo.names[0] == "Hips");
@@ -231,19 +231,18 @@ TEST_CASE("motion: BVH nodes, rest pose and sampled local transforms") {
   CHECK(m[4] == doctest::Approx(std::sin(M_PI / 4)).epsilon(1e-5));
   // Root translation keys are interpolated too: z = 2 per file frame.
   CHECK(mo.local[16 * (3 * n) + 11] == doctest::Approx(3.0).epsilon(1e-5));
-  std::remove(path.c_str());
 }
 
 TEST_CASE("motion: errors name the file and the reason") {
-  const std::string missing = temp_path("bsp_no_such_motion.bvh");
+  const bsp::testing::TempDir tmp("bsp_test_motion");
+  const std::string missing = tmp.path("no_such_motion.bvh");
   try {
     bsp::load_motion(missing);
     FAIL("expected MotionError");
   } catch (const bsp::MotionError& e) {
     CHECK(std::string(e.what()).find(missing) != std::string::npos);
   }
-  const std::string path = write_bvh();
+  const std::string path = write_bvh(tmp);
   CHECK_THROWS_AS(bsp::load_motion(path, 0.0), bsp::MotionError);
   CHECK_THROWS_AS(bsp::load_motion(path, 30.0, 3), bsp::MotionError);
-  std::remove(path.c_str());
 }
