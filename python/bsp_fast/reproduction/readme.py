@@ -45,11 +45,7 @@ def portable(path) -> str:
     """``path`` as a published file names it: relative to the working directory (the
     repository the experiments run from) when inside it, else its last component (a
     run folder's ``TABLE-BUDGET``), never this machine's absolute path."""
-    p = Path(path)
-    try:
-        return str(p.resolve().relative_to(Path.cwd().resolve()))
-    except ValueError:
-        return p.name
+    return _rel(path, Path.cwd())
 
 
 def portable_command(script: str, argv) -> str:
