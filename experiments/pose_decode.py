@@ -1,16 +1,18 @@
 #!/usr/bin/env python3
 """Decoding ablation of pose_temporal on the same training (#38 item 4): each seed's best
 checkpoint scored on the test split with the soft-argmax it was trained and tabled with,
-and again with DARK (Taylor refinement of the predicted distribution's peak,
-``bsp_fast.models.pose_temporal.dark_decode``).
+again with DARK (Taylor refinement of the predicted distribution's peak,
+``bsp_fast.models.pose_temporal.dark_decode``) and with the soft-argmax and a test-time
+flip (``flip_test``: the mirrored crop decoded too, mapped back and averaged).
 
 pose_temporal's loss is the soft-argmax's whatever ``decode`` is, so the ablation table's
 ``dark`` row (a training with ``hp: {decode: dark}``) would repeat these trainings step for
 step and pick the same checkpoints; scoring the table's own checkpoints twice answers it
 without training again. The soft-argmax scores must reproduce the runs' ``metrics.json``
 (checked, printed). Per metric: the difference DARK - soft-argmax over seeds and test
-recordings (the tables' two-level bootstrap, t method; the two decodings are the same runs,
-so seeds and recordings are drawn together).
+recordings (the tables' two-level bootstrap, t method; the decodings are the same runs,
+so seeds and recordings are drawn together), for DARK and for the flip each against the
+soft-argmax.
 
     python experiments/pose_decode.py RUNS/pose_estimation-quick --row pose_temporal \\
         --out DIR
@@ -28,7 +30,11 @@ from pathlib import Path
 
 METRICS = ("pck_0.05", "pck_0.05_visible", "pck_0.05_occluded", "pck_0.05_hands",
            "pck_0.05_feet", "pckhn_0.1")
-DECODES = ("soft_argmax", "dark")
+# each decoding: the model attributes it sets on the trained network
+DECODES = {"soft_argmax": {"decode": "soft_argmax", "flip_test": False},
+           "dark": {"decode": "dark", "flip_test": False},
+           "flip": {"decode": "soft_argmax", "flip_test": True}}
+LABELS = {"soft_argmax": "soft-argmax", "dark": "DARK", "flip": "soft-argmax + flip"}
 
 
 def _decode_callback(decode: str):
@@ -36,7 +42,8 @@ def _decode_callback(decode: str):
 
     class SetDecode(pl.Callback):
         def on_test_start(self, trainer, pl_module):
-            pl_module.net.decode = decode
+            for key, value in DECODES[decode].items():
+                setattr(pl_module.net, key, value)
 
     return SetDecode()
 
@@ -51,6 +58,8 @@ def score(run: Path, decode: str) -> dict:
 
 
 def summarise(seeds: dict) -> list:
+    """Per metric: each decoding's mean over seeds, and each other decoding minus the
+    soft-argmax (two-level interval, p)."""
     import numpy as np
 
     from bsp_fast.metrics import hierarchical as H
@@ -58,40 +67,56 @@ def summarise(seeds: dict) -> list:
 
     out = []
     for m in METRICS:
-        rows = []
+        rows = {}
         for decode in DECODES:
-            per = [seeds[s][decode]["per_recording"] for s in sorted(seeds)]
-            if any(m not in p["metrics"] for p in per):
-                break
+            per = [seeds[s].get(decode, {}).get("per_recording") for s in sorted(seeds)]
+            if any(p is None or m not in p["metrics"] for p in per):
+                continue
             pooled = [U.pool([p], m) for p in per]
             recs = sorted({r for rs, _, _ in pooled for r in rs})
             num, den = np.zeros((len(per), len(recs))), np.zeros((len(per), len(recs)))
             for i, (rs, n, d) in enumerate(pooled):
                 idx = [recs.index(r) for r in rs]
                 num[i, idx], den[i, idx] = n, d
-            rows.append(H.Ratios(num, den))
-        if len(rows) < 2:
+            rows[decode] = H.Ratios(num, den)
+        if "soft_argmax" not in rows or len(rows) < 2:
             continue
-        value = [float(np.mean(H.row_values(r.num, r.den))) for r in rows]
-        t = H.two_level(rows, lambda v: v[1] - v[0], seed_keys=["runs", "runs"])
-        out.append({"metric": m, "soft_argmax": value[0], "dark": value[1],
-                    "difference": t.value, "interval": [t.low, t.high], "p": t.p,
-                    "seeds": len(seeds), "recordings": t.n})
+        entry = {"metric": m, "seeds": len(seeds)}
+        for decode, r in rows.items():
+            entry[decode] = float(np.mean(H.row_values(r.num, r.den)))
+        for decode in rows:
+            if decode == "soft_argmax":
+                continue
+            t = H.two_level([rows["soft_argmax"], rows[decode]], lambda v: v[1] - v[0],
+                            seed_keys=["runs", "runs"])
+            entry[f"{decode}_difference"] = {"value": t.value, "interval": [t.low, t.high],
+                                             "p": t.p, "recordings": t.n}
+        out.append(entry)
     return out
 
 
 def render(doc: dict) -> str:
+    shown = [d for d in DECODES if any(d in r for r in doc["summary"])]
+    others = [d for d in shown if d != "soft_argmax"]
     lines = [f"pose_temporal's {len(doc['seeds'])} seeds ({', '.join(doc['seeds'])}) of "
-             f"`{doc['runs']}`, test split, the same checkpoints decoded two ways "
-             "(PCK in %; difference DARK − soft-argmax [95 % interval over seeds and "
-             "recordings, t method], two-sided p; soft-argmax reproduces metrics.json to "
-             f"{doc['reproduced_max_abs']:.1e}).", "",
-             "| metric | soft-argmax | DARK | DARK − soft-argmax | p |", "|---|---|---|---|---|"]
+             f"`{doc['runs']}`, test split, the same checkpoints decoded "
+             f"{len(shown)} ways (PCK in %; each difference against the soft-argmax [95 % "
+             "interval over seeds and recordings, t method], two-sided p; the soft-argmax "
+             f"reproduces metrics.json to {doc['reproduced_max_abs']:.1e}).", "",
+             "| metric | " + " | ".join(LABELS[d] for d in shown) + " | "
+             + " | ".join(f"{LABELS[d]} − soft-argmax | p" for d in others) + " |",
+             "|---" * (1 + len(shown) + 2 * len(others)) + "|"]
     for r in doc["summary"]:
-        lo, hi = r["interval"]
-        lines.append(f"| {r['metric']} | {100 * r['soft_argmax']:.1f} | {100 * r['dark']:.1f} "
-                     f"| {100 * r['difference']:+.2f} [{100 * lo:+.2f}, {100 * hi:+.2f}] | "
-                     f"{r['p']:.3f} |")
+        cells = [f"{100 * r[d]:.1f}" if d in r else "–" for d in shown]
+        for d in others:
+            t = r.get(f"{d}_difference")
+            if t is None:
+                cells += ["–", "–"]
+                continue
+            lo, hi = t["interval"]
+            cells += [f"{100 * t['value']:+.2f} [{100 * lo:+.2f}, {100 * hi:+.2f}]",
+                      f"{t['p']:.3f}"]
+        lines.append(f"| {r['metric']} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -115,8 +140,10 @@ def main(argv=None) -> int:
     worst = 0.0
     for run in runs:
         seed = run.name.split("-", 1)[1]
-        if seed not in done:
-            done[seed] = {d: score(run, d) for d in DECODES}
+        have = done.setdefault(seed, {})
+        for d in DECODES:
+            if d not in have:
+                have[d] = score(run, d)
         tabled = json.loads((run / "metrics.json").read_text(encoding="utf-8"))["test"]
         worst = max([worst] + [abs(done[seed]["soft_argmax"]["metrics"][m] - tabled[m])
                                for m in METRICS if m in tabled])
@@ -127,8 +154,9 @@ def main(argv=None) -> int:
                                            sys.argv[1:] if argv is None else argv)}
         write_text(path, json.dumps(doc, indent=1))
         write_text(a.out / "pose_decode.md", render(doc))
-        print(f"seed {seed}: soft-argmax {done[seed]['soft_argmax']['metrics']['pck_0.05']:.4f} "
-              f"dark {done[seed]['dark']['metrics']['pck_0.05']:.4f}", flush=True)
+        print(f"seed {seed}: " + ", ".join(
+            f"{LABELS[d]} {done[seed][d]['metrics']['pck_0.05']:.4f}" for d in DECODES),
+            flush=True)
     print(render(doc), end="")
     return 0
 

@@ -146,12 +146,31 @@ def test_pose_decode_smoke_rescores_the_same_checkpoints(tmp_path):
     assert doc["seeds"] == ["22742", "22743"] and doc["reproduced_max_abs"] == 0.0
     one = doc["summary"][0]
     assert one["metric"] == "pck_0.05"
-    dark = [doc["per_seed"][s]["dark"]["metrics"]["pck_0.05"] for s in doc["seeds"]]
-    soft = [doc["per_seed"][s]["soft_argmax"]["metrics"]["pck_0.05"] for s in doc["seeds"]]
-    # the summary's values are the seeds' means of the two scorings
-    assert one["dark"] == pytest.approx(sum(dark) / 2)
-    assert one["difference"] == pytest.approx((sum(dark) - sum(soft)) / 2)
-    assert "| pck_0.05 |" in (tmp_path / "out" / "pose_decode.md").read_text()
+    got = {d: [doc["per_seed"][s][d]["metrics"]["pck_0.05"] for s in doc["seeds"]]
+           for d in ("soft_argmax", "dark", "flip")}
+    # the summary's values are the seeds' means of the scorings, each difference against
+    # the soft-argmax
+    for d in ("dark", "flip"):
+        assert one[d] == pytest.approx(sum(got[d]) / 2)
+        assert one[f"{d}_difference"]["value"] == pytest.approx(
+            (sum(got[d]) - sum(got["soft_argmax"])) / 2)
+    assert got["flip"] != got["soft_argmax"]  # the flip was applied
+    md = (tmp_path / "out" / "pose_decode.md").read_text()
+    assert "| pck_0.05 |" in md and "soft-argmax + flip − soft-argmax" in md
+    # --resume scores only what is missing: a decoding dropped from one seed comes back
+    first = doc["per_seed"]["22743"].pop("flip")["metrics"]
+    (tmp_path / "out" / "pose_decode.json").write_text(json.dumps(doc))
+    calls = []
+    real = pd.score
+    pd.score = lambda run, d: calls.append((run.name, d)) or real(run, d)
+    try:
+        assert pd.main([str(tmp_path / "runs" / "pose_estimation-smoke"), "--out",
+                        str(tmp_path / "out"), "--resume"]) == 0
+    finally:
+        pd.score = real
+    assert calls == [("seed-22743", "flip")]
+    again = json.loads((tmp_path / "out" / "pose_decode.json").read_text())
+    assert again["per_seed"]["22743"]["flip"]["metrics"] == first  # scored alike again
 
 
 def test_cross_table_difference_by_hand_with_holm(tmp_path):

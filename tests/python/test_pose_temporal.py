@@ -178,6 +178,34 @@ def test_the_model_decodes_its_heatmaps_into_crop_pixels(decode, loss):
     torch.testing.assert_close(out.double(), 2 * cells.view(2, 3, 26, 2), atol=tol, rtol=0)
 
 
+@pytest.mark.parametrize("decode", ["soft_argmax", "dark"])
+def test_flip_test_averages_with_the_mirrored_crop_mapped_back_by_the_data_flip(decode):
+    """flip_test = the mean of the plain prediction and the mirrored crop's prediction
+    mapped back by the data pipeline's own flip (u -> S - u, left/right swapped), in eval
+    only; the validation loss scores the averaged joints."""
+    from bsp_fast.data import flip_horizontal
+
+    torch.manual_seed(3)
+    m = create(decode=decode, **TINY).eval()
+    x = crops(2, 3, 32, seed=4)
+    with torch.no_grad():
+        plain, mirrored = m(x).numpy(), m(x.flip(-1)).numpy()
+        m.flip_test = True
+        both = m(x).numpy()
+    want = (plain + flip_horizontal(mirrored, 32)) / 2
+    np.testing.assert_allclose(both, want, atol=1e-4, rtol=0)
+    assert np.abs(both - plain).max() > 0.05  # an untrained net is not mirror-symmetric
+    b = {"inputs": x, "targets": torch.as_tensor(want), "visible": None}
+    if decode == "soft_argmax":  # the loss's soft-argmax joints are the averaged ones
+        with torch.no_grad():
+            assert float(m.loss(m.forward_batch(b), b)) < 1e-4
+    m.train()
+    with torch.no_grad():  # training never flips (the augmentation does)
+        np.testing.assert_allclose(m(x).numpy(), plain, atol=1e-5, rtol=0)
+    with pytest.raises(ValueError, match="flip_test must be true or false"):
+        create(flip_test=1)
+
+
 # ---------------------------------------------------------------------- loss
 def batch_for(m, B=2, L=3, S=32, seed=0):
     g = torch.Generator().manual_seed(seed)

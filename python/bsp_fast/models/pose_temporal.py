@@ -15,6 +15,12 @@ decodings can be compared on one trained network) or ``heatmap`` (MSE against Ga
 targets centred on the exact sub-pixel joint, DARK's unbiased encoding). Every joint of a
 frame with a crop is supervised (the table's protocol scores every joint), the ones its
 ``visible`` mask hides with weight ``occluded_weight``.
+
+``flip_test`` (evaluation only, off by default): the crops are also decoded mirrored
+(``u -> S - u``, the convention of the training flips) and the two predictions averaged
+after the mirrored one is mapped back and its left/right joints swapped; the test-time
+flip of SimpleBaseline and HRNet, averaged in joint coordinates rather than heatmaps so
+that no half-cell shift between mirrored maps needs correcting.
 """
 from __future__ import annotations
 
@@ -32,6 +38,7 @@ from .registry import register
 __all__ = ["PoseTemporal", "dark_decode", "gaussian_heatmaps", "soft_argmax"]
 
 J = _sk.NUM_JOINTS
+_FLIP = tuple(_sk.FLIP_PERMUTATION)  # joint k of a mirrored crop is joint _FLIP[k] here
 DECODES = ("soft_argmax", "dark")
 LOSSES = ("integral", "heatmap")
 TEMPORAL = ("conv", "none")
@@ -188,7 +195,7 @@ class PoseTemporal(PoseEstimationModel):
     def __init__(self, *, width: int = 16, depth: int = 4, temporal: str = "conv",
                  temporal_kernel: int = 5, decode: str = "soft_argmax",
                  loss: str = "integral", sigma: float = 1.5, occluded_weight: float = 1.0,
-                 norm: str = "group", lr_schedule: str = "constant"):
+                 norm: str = "group", lr_schedule: str = "constant", flip_test: bool = False):
         super().__init__(locals())
         check_int("width", width)
         check_int("depth", depth, minimum=2)
@@ -205,7 +212,9 @@ class PoseTemporal(PoseEstimationModel):
         check_float("occluded_weight", occluded_weight, 0.0, 1.0)
         check_choice("norm", norm, NORMS)
         check_choice("lr_schedule", lr_schedule, LR_SCHEDULES)
-        self.lr_schedule = lr_schedule
+        if not isinstance(flip_test, bool):
+            raise ValueError(f"flip_test must be true or false, got {flip_test!r}")
+        self.lr_schedule, self.flip_test = lr_schedule, flip_test
         self.depth, self.sigma = depth, float(sigma)
         self.decode, self.loss_kind = decode, loss
         self.occluded_weight = float(occluded_weight)
@@ -262,11 +271,12 @@ class PoseTemporal(PoseEstimationModel):
             y = fuse(y + skip)
         return self.head(y)
 
-    def compute(self, inputs, visible):
-        B, L, _, S, _ = inputs.shape
+    def _decode(self, inputs):
+        """``(B, L, 3, S, S)`` crops -> (joints ``(B*L, J, 2)`` in crop pixels, heatmap
+        logits, the soft-argmax joints or None)."""
+        S = inputs.shape[-1]
         logits = self.heatmaps(inputs).float()
-        H = logits.shape[-1]
-        scale = S / H  # heatmap cells -> crop pixels
+        scale = S / logits.shape[-1]  # heatmap cells -> crop pixels
         soft = None
         if self.loss_kind == "integral":
             soft = soft_argmax(logits, self.log_beta.exp()) * scale
@@ -279,6 +289,23 @@ class PoseTemporal(PoseEstimationModel):
             maps = (torch.softmax(logits.flatten(2) * self.log_beta.exp(), -1).view_as(logits)
                     if self.loss_kind == "integral" else logits)
             out = dark_decode(maps, self.sigma) * scale
+        return out, logits, soft
+
+    def compute(self, inputs, visible):
+        B, L, _, S, _ = inputs.shape
+        out, logits, soft = self._decode(inputs)
+        if self.flip_test and not self.training:
+            back = torch.as_tensor(_FLIP, device=out.device)
+            mirror = torch.tensor([-1.0, 1.0], device=out.device)
+            shift = torch.tensor([float(S), 0.0], device=out.device)
+
+            def unflip(p):  # mirrored-crop joints -> this crop's, left/right swapped back
+                return p[:, back] * mirror + shift
+
+            f_out, _, f_soft = self._decode(inputs.flip(-1))
+            out = (out + unflip(f_out)) / 2
+            if soft is not None:  # the validation loss scores what is reported
+                soft = (soft + unflip(f_soft)) / 2
         out = out.view(B, L, J, 2)
         self._last = (out, logits, soft)
         return out
