@@ -206,6 +206,56 @@ def test_flip_test_averages_with_the_mirrored_crop_mapped_back_by_the_data_flip(
         create(flip_test=1)
 
 
+def test_the_activations_layout_changes_speed_not_the_function(monkeypatch):
+    """MEMORY_FORMAT (NCHW under bf16, channels_last in float32 by default) only picks the
+    kernels: outputs and gradients agree across layouts to float32 rounding."""
+    import bsp_fast.models.pose_temporal as PT
+
+    torch.manual_seed(5)
+    m = create(**TINY)
+    b = batch_for(m)
+    got = {}
+    for fmt in (torch.contiguous_format, torch.channels_last, None):
+        monkeypatch.setattr(PT, "MEMORY_FORMAT", fmt)
+        m.zero_grad()
+        out = m.forward_batch(b)
+        m.loss(out, b).backward()
+        got[fmt] = (out.detach(), [p.grad.clone() for p in m.parameters()])
+    ref_out, ref_grad = got[None]
+    for out, grad in got.values():
+        torch.testing.assert_close(out, ref_out, atol=1e-4, rtol=0)
+        for a, g in zip(grad, ref_grad):
+            torch.testing.assert_close(a, g, atol=1e-4, rtol=1e-3)
+    captured = []
+    monkeypatch.setattr(PT, "MEMORY_FORMAT", None)
+    h = m.stem.register_forward_hook(lambda mod, inp, outp: captured.append(
+        inp[0].is_contiguous()))
+    with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16):
+        m(b["inputs"])
+    with torch.no_grad():
+        m(b["inputs"])
+    h.remove()
+    assert captured == [True, False]  # bf16: NCHW; float32: channels_last
+
+
+def test_bench_memory_format_smoke(capsys):
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_memory_format.py"
+    spec = importlib.util.spec_from_file_location("bench_memory_format", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    assert bench.main(["--models", "pose_temporal", "--crop", "32", "--clips", "1",
+                       "--frames", "2", "--steps", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "| pose_temporal | float32 |" in out and "| pose_temporal | bf16 |" in out
+    rows = [line for line in out.splitlines() if line.startswith("| pose_temporal |")]
+    assert [r.rsplit("|", 2)[1].strip() for r in rows] == ["channels_last", "NCHW"]
+    import bsp_fast.models.pose_temporal as PT
+    assert PT.MEMORY_FORMAT is None  # restored
+
+
 # ---------------------------------------------------------------------- loss
 def batch_for(m, B=2, L=3, S=32, seed=0):
     g = torch.Generator().manual_seed(seed)

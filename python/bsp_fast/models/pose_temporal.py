@@ -44,6 +44,11 @@ LOSSES = ("integral", "heatmap")
 TEMPORAL = ("conv", "none")
 NORMS = ("group", "batch")
 LR_SCHEDULES = ("constant", "cosine")
+#: the activations' layout; None: NCHW under bf16 autocast, channels_last otherwise. On
+#: CPU GroupNorm's channels_last kernels took 4-14x longer in bf16 (forward + backward)
+#: and made a bf16 training step 1.5x slower than NCHW, while in float32 channels_last is
+#: ~10 % faster (benchmarks/bench_memory_format.py; docs/performance.md)
+MEMORY_FORMAT = None
 _MEAN, _STD = 0.45, 0.25  # as pose_cnn: crops scaled to [0, 1], then (x - mean) / std
 
 
@@ -257,9 +262,12 @@ class PoseTemporal(PoseEstimationModel):
             raise ValueError(f"{self.name}: the crop size {S} must be a multiple of "
                              f"2**depth = {2 ** self.depth} (depth={self.depth}); e.g. "
                              "crop sizes 64, 96 and 128 with depth 4 or 5")
-        x = inputs.reshape(B * L, 3, S, S).contiguous(memory_format=torch.channels_last)
-        x = (x.to(torch.get_autocast_dtype("cpu") if torch.is_autocast_enabled("cpu")
-                  else torch.float32) * (1.0 / (255 * _STD)) - _MEAN / _STD)
+        low = torch.is_autocast_enabled("cpu")
+        fmt = MEMORY_FORMAT if MEMORY_FORMAT is not None else (
+            torch.contiguous_format if low else torch.channels_last)
+        x = inputs.reshape(B * L, 3, S, S).contiguous(memory_format=fmt)
+        x = (x.to(torch.get_autocast_dtype("cpu") if low else torch.float32)
+             * (1.0 / (255 * _STD)) - _MEAN / _STD)
         skips = [self.stem(x)]
         for stage in self.down:
             skips.append(stage(skips[-1]))
