@@ -139,6 +139,27 @@ def test_a_run_records_what_auto_picked_and_why_and_bsp_eval_uses_it(probe_on, t
     assert evaluate(run.run_dir, "test").config["precision"] == res["precision"]
 
 
+@pytest.mark.skipif(not NATIVE, reason="the probe runs on CPUs with native bf16 only")
+def test_a_models_speed_revision_makes_the_probe_measure_again(probe_on, tmp_path,
+                                                               monkeypatch):
+    """A code change that alters a model's step times raises its speed_revision: the
+    answer cached before is then not reused (pose_temporal's NCHW layout did)."""
+    from bsp_fast.models.martinez import Baseline3D
+
+    h5 = tmp_path / "c.h5"
+    write_clip_file(h5, clips=(16, 4, 4), clip_length=8, seed=1)
+    opts = dict(data=h5, epochs=1, batch_size=8, quiet=True,
+                hp={"linear_size": 32, "num_blocks": 1})
+    bsp_fast.train("lifting", "baseline_3d", out=tmp_path / "a", **opts)
+    monkeypatch.setattr(Baseline3D, "speed_revision", 3)
+    run = bsp_fast.train("lifting", "baseline_3d", out=tmp_path / "b", **opts)
+    res = yaml.safe_load((run.run_dir / "config.yaml").read_text())["resolved"]
+    assert "probe on this CPU" in res["precision_reason"] and "cached" not in \
+        res["precision_reason"]
+    keys = sorted(json.loads(probe_on.read_text()))
+    assert len(keys) == 2 and sum(" speed 3 |" in k for k in keys) == 1
+
+
 #: bf16 autocast against float32 on the same weights and clips, per task: the metric and
 #: its tolerance (relative for losses and errors in mm, absolute for a share of joints)
 TOLERANCE = {"classification": ("loss", dict(rel=0.02)),

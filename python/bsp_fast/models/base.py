@@ -68,6 +68,9 @@ class BaseModel(nn.Module):
     #: measured faster for this model (docs/training.md, "Precision"), float32 otherwise;
     #: the one place that per-model decision lives
     cpu_bf16_faster: bool = False
+    #: raised when a code change alters this model's float32/bf16 step times: part of the
+    #: precision probe's cache key, so answers measured before are not reused
+    speed_revision: int = 0
 
     def __init__(self, values: dict | None = None):
         super().__init__()

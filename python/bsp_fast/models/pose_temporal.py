@@ -196,6 +196,7 @@ class PoseTemporal(PoseEstimationModel):
     """
 
     default_lr = 1e-3  # Adam's usual rate for heatmap nets trained from scratch
+    speed_revision = 1  # NCHW under bf16 (ebfbec9): x1.5 faster bf16 steps than probed before
 
     def __init__(self, *, width: int = 16, depth: int = 4, temporal: str = "conv",
                  temporal_kernel: int = 5, decode: str = "soft_argmax",

@@ -255,6 +255,8 @@ def _precision(cfg: dict, module, dm) -> tuple:
     model_key = (f"{cfg['task']}/{cfg['model']} "
                  f"{json.dumps(module.hparams['hparams'], sort_keys=True, default=str)} "
                  f"batch {n}")
+    if module.net.speed_revision:
+        model_key += f" speed {module.net.speed_revision}"
     return decide_precision(cfg["precision"], cfg["accelerator"], module.net, probe=probe,
                             key=probe_key(model_key, torch.get_num_threads()))
 
