@@ -21,6 +21,11 @@ tables' equivalence test against ``--margin`` (absolute, or ``N%`` of the auto r
 value): *agrees* when the whole interval lies within +-margin, *differs* when wholly
 outside, *undetermined* otherwise; a margin is to be stated before the float32 runs.
 
+``--change`` names another change than float32 for a re-run that keeps the table's
+precision (e.g. ``--change "NCHW layout (ebfbec9)"``: the same row and seeds re-trained
+after a code change that should alter rounding only); its re-run must have trained in
+the table runs' precision.
+
 The margins, stated before the first float32 run (2026-11-26): MPJPE 2 % and PCK 0.5
 percentage points (the bf16 tolerances on the same weights, docs/training.md), F1 0.02.
 Rows: classification lstm-perfect (f1, 0.02), lifting lstm (mpjpe_mm, 2%), autoencoder
@@ -57,7 +62,8 @@ def _margin(text: str, value: float) -> float:
         sys.exit(f"precision_retrain: --margin must be a number or N%, got {text!r}")
 
 
-def compare(auto_dir: Path, fp32_dir: Path, row: str, metric: str, margin: str) -> dict:
+def compare(auto_dir: Path, fp32_dir: Path, row: str, metric: str, margin: str,
+            change: str = "float32") -> dict:
     from bsp_fast.metrics.uncertainty import equivalence
     from bsp_fast.reproduction.evidence import rerun_difference
     from bsp_fast.reproduction.readme import portable
@@ -67,9 +73,13 @@ def compare(auto_dir: Path, fp32_dir: Path, row: str, metric: str, margin: str) 
         if row not in res["results"]:
             sys.exit(f"precision_retrain: {folder / 'results.json'} has no row {row!r}")
     ra, rb = a["results"][row], b["results"][row]
-    if _precisions(rb) != ["32"]:
+    if change == "float32" and _precisions(rb) != ["32"]:
         sys.exit(f"precision_retrain: {fp32_dir}: row {row!r} ran in {_precisions(rb)}, "
                  "not float32 (--set precision=32)")
+    if change != "float32" and _precisions(rb) != _precisions(ra):
+        sys.exit(f"precision_retrain: {fp32_dir}: row {row!r} ran in {_precisions(rb)}, the "
+                 f"table's runs in {_precisions(ra)}: a re-run for {change!r} must keep the "
+                 "precision")
     test = rerun_difference(a, row, b, row, metric)
     m = _margin(margin, ra["metrics"][metric])
     return {"table": a.get("table"), "budget": a.get("budget"), "row": row,
@@ -79,7 +89,7 @@ def compare(auto_dir: Path, fp32_dir: Path, row: str, metric: str, margin: str) 
             "auto_std": ra.get("std", {}).get(metric), "fp32_std": rb.get("std", {}).get(metric),
             "difference": test.value, "interval": [test.low, test.high], "p": test.p,
             "margin": m, "margin_given": margin,
-            "verdict": equivalence(test, 0.0, m),
+            "verdict": equivalence(test, 0.0, m), "change": change,
             "fit_cpu_min": {k: _cpu(r) for k, r in (("auto", ra), ("fp32", rb))},
             "auto_runs": portable(auto_dir), "fp32_runs": portable(fp32_dir)}
 
@@ -94,15 +104,16 @@ def render(rows: list) -> str:
         return ("–" if x is None else "0" if x == 0 else f"{x:.{d}g}" if abs(x) >= 1e-3
                 else f"{x:.2e}")
 
-    lines = ["| table / row | metric | seeds | auto (precision) | float32 | float32 − auto "
-             "[95 % interval] | margin | verdict | fit CPU min auto / float32 |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| table / row | metric | seeds | table's runs (precision) | re-run with | re-run "
+             "| re-run − table's [95 % interval] | margin | verdict | fit CPU min table's / "
+             "re-run |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lo, hi = r["interval"]
         cpu = r["fit_cpu_min"]
         lines.append(
             f"| {r['table']} / {r['row']} | {r['metric']} | {len(r['seeds'])} | "
             f"{f(r['auto'])} ± {f(r['auto_std'], 2)} ({', '.join(r['auto_precision'])}) | "
+            f"{r.get('change', 'float32')} | "
             f"{f(r['fp32'])} ± {f(r['fp32_std'], 2)} | {r['difference']:+.4g} "
             f"[{lo:+.4g}, {hi:+.4g}] | ±{f(r['margin'], 3)} ({r['margin_given']}) | "
             f"{r['verdict']} | {f(cpu['auto'], 3)} / {f(cpu['fp32'], 3)} |")
@@ -121,20 +132,24 @@ def main(argv=None) -> int:
     p.add_argument("--margin", required=True, help="equivalence margin: absolute, or N%% of "
                    "the auto row's value")
     p.add_argument("--out", type=Path, required=True, help="folder of precision_retrain.json/.md")
+    p.add_argument("--change", default="float32", help="what the re-run changed (default "
+                   "float32; anything else: the table's precision, other code)")
     a = p.parse_args(argv)
     from bsp_fast.atomic import write_text
     from bsp_fast.reproduction.readme import portable_command
     from bsp_fast.training.precision import cpu_summary
 
-    row = compare(a.auto, a.fp32, a.row, a.metric, a.margin)
+    row = compare(a.auto, a.fp32, a.row, a.metric, a.margin, a.change)
     row["command"] = portable_command("experiments/precision_retrain.py",
                                       sys.argv[1:] if argv is None else argv)
     row["cpu"] = cpu_summary()  # where this script ran; the runs' CPU is in their logs
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / f"{FILE}.json"
     doc = json.loads(path.read_text(encoding="utf-8")) if path.exists() else {"rows": []}
-    rows = [r for r in doc["rows"] if (r["table"], r["row"], r["metric"]) !=
-            (row["table"], row["row"], row["metric"])] + [row]
+    def ident(r):
+        return r["table"], r["row"], r["metric"], r.get("change", "float32")
+
+    rows = [r for r in doc["rows"] if ident(r) != ident(row)] + [row]
     doc = {"rows": rows}
     write_text(path, json.dumps(doc, indent=1) + "\n")
     write_text(a.out / f"{FILE}.md", render(rows))

@@ -126,6 +126,16 @@ def test_precision_retrain_difference_by_hand_and_verdicts(tmp_path):
     assert "| lifting / lstm | mpjpe_mm | 2 |" in (out / "precision_retrain.md").read_text()
     with pytest.raises(SystemExit, match="not float32"):
         pr.main([*args, "--fp32", str(auto), "--margin", "1"])
+    # another change keeps the table's precision: a row of its own beside float32's
+    relaid = _fake_results(tmp_path / "relaid", "bf16-mixed",
+                           {1: [10.0, 40.0, 30.0], 2: [12.0, 36.0, 33.0]})
+    assert pr.main([*args, "--fp32", str(relaid), "--margin", "2%", "--change", "layout"]) == 0
+    rows = json.loads((out / "precision_retrain.json").read_text())["rows"]
+    assert [(r["change"], r["verdict"]) for r in rows] == [("float32", "differs"),
+                                                          ("layout", "agrees")]
+    assert "| layout |" in (out / "precision_retrain.md").read_text()
+    with pytest.raises(SystemExit, match="must keep the precision"):
+        pr.main([*args, "--fp32", str(same), "--margin", "1", "--change", "layout"])
 
 
 def test_pose_decode_smoke_rescores_the_same_checkpoints(tmp_path):
