@@ -183,6 +183,14 @@ def test_pose_decode_smoke_rescores_the_same_checkpoints(tmp_path):
     assert again["per_seed"]["22743"]["flip"]["metrics"] == first  # scored alike again
 
 
+def test_pose_decode_checks_each_run_against_its_own_decoding(tmp_path):
+    pd = _load("pose_decode")
+    for hp, want in (("{width: 16}", "soft_argmax"), ("{width: 32, flip_test: true}", "flip"),
+                     ("{decode: dark}", "dark"), ("null", "soft_argmax")):
+        (tmp_path / "config.yaml").write_text(f"model: pose_temporal\nhp: {hp}\n")
+        assert pd._own_decode(tmp_path) == want
+
+
 def test_cross_table_difference_by_hand_with_holm(tmp_path):
     ct = _load("cross_table")
     a = _fake_results(tmp_path / "a", "32", {1: [10.0, 40.0, 30.0], 2: [12.0, 36.0, 33.0]})
