@@ -8,8 +8,8 @@ flip (``flip_test``: the mirrored crop decoded too, mapped back and averaged).
 pose_temporal's loss is the soft-argmax's whatever ``decode`` is, so the ablation table's
 ``dark`` row (a training with ``hp: {decode: dark}``) would repeat these trainings step for
 step and pick the same checkpoints; scoring the table's own checkpoints twice answers it
-without training again. The soft-argmax scores must reproduce the runs' ``metrics.json``
-(checked, printed). Per metric: the difference DARK - soft-argmax over seeds and test
+without training again. The decoding each run was tabled with (its ``hp``) must reproduce
+its ``metrics.json`` (checked, printed). Per metric: the difference DARK - soft-argmax over seeds and test
 recordings (the tables' two-level bootstrap, t method; the decodings are the same runs,
 so seeds and recordings are drawn together), for DARK and for the flip each against the
 soft-argmax.
@@ -108,7 +108,7 @@ def summarise(seeds: dict) -> list:
 def render(doc: dict) -> str:
     shown = [d for d in DECODES if any(d in r for r in doc["summary"])]
     others = [d for d in shown if d != "soft_argmax"]
-    lines = [f"pose_temporal's {len(doc['seeds'])} seeds ({', '.join(doc['seeds'])}) of "
+    lines = [f"{len(doc['seeds'])} seeds ({', '.join(doc['seeds'])}) of "
              f"`{doc['runs']}`, test split, the same checkpoints decoded "
              f"{len(shown)} ways (PCK in %; each difference against the soft-argmax [95 % "
              "interval over seeds and recordings, t method], two-sided p; the decoding "
