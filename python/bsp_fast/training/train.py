@@ -252,11 +252,9 @@ def _precision(cfg: dict, module, dm) -> tuple:
             steps.append(time_steps(module.net, ds[list(range(n))]))
         return steps[0](bf16)
 
-    model_key = (f"{cfg['task']}/{cfg['model']} "
+    model_key = (f"{cfg['task']}/{cfg['model']} "  # + a code change that moved its speed:
                  f"{json.dumps(module.hparams['hparams'], sort_keys=True, default=str)} "
-                 f"batch {n}")
-    if module.net.speed_revision:
-        model_key += f" speed {module.net.speed_revision}"
+                 f"batch {n}" + (f" speed {r}" if (r := module.net.speed_revision) else ""))
     return decide_precision(cfg["precision"], cfg["accelerator"], module.net, probe=probe,
                             key=probe_key(model_key, torch.get_num_threads()))
 
