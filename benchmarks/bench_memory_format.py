@@ -1,7 +1,8 @@
 """Training-step CPU time of the pose networks with their activations in NCHW against
 channels_last (the ``MEMORY_FORMAT`` of ``bsp_fast.models.pose_temporal`` and
-``pose_cnn``; the "default" column is what each uses), float32 and bf16 autocast, one thread: forward, loss, backward and AdamW
-on random crops at the quick budget's batch (4 clips x 30 frames). The formats are timed
+``pose_cnn``; the "default" column is what each uses), float32 and bf16 autocast, one
+thread: forward, loss, backward and AdamW on random crops at the quick budget's batch (4
+clips x 30 frames). The formats are timed
 in turn (ABAB...) so that a change of load hits both; the median step's process CPU time
 is reported, with the ratio channels_last / NCHW.
 
@@ -30,6 +31,7 @@ def main(argv=None) -> int:
     import torch
 
     from bsp_fast import models
+    from bsp_fast.models.base import activation_layout
     from bsp_fast.training import precision as P
 
     torch.set_num_threads(1)
@@ -74,8 +76,9 @@ def main(argv=None) -> int:
             finally:
                 module.MEMORY_FORMAT = default
             a, b = (statistics.median(times[k]) for k in formats)
-            which = {torch.contiguous_format: "NCHW", torch.channels_last: "channels_last",
-                     None: "NCHW" if dtype == "bf16" else "channels_last"}[default]
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=dtype == "bf16"):
+                used = activation_layout(default)
+            which = "NCHW" if used == torch.contiguous_format else "channels_last"
             print(f"| {name} | {dtype} | {a:.3f} | {b:.3f} | x{b / a:.2f} | {which} |",
                   flush=True)
     return 0

@@ -52,8 +52,8 @@ def _own_decode(run: Path) -> str:
     """Which of DECODES the run's own hyper-parameters are (its config.yaml's ``hp``)."""
     import yaml
 
-    hp = (yaml.safe_load((run / "config.yaml").read_text(encoding="utf-8")) or {}).get("hp")
-    hp = hp or {}
+    cfg = yaml.safe_load((run / "config.yaml").read_text(encoding="utf-8")) or {}
+    hp = cfg.get("hp") or {}
     want = {"decode": hp.get("decode", "soft_argmax"), "flip_test": bool(hp.get("flip_test"))}
     return next((d for d, v in DECODES.items() if v == want), "soft_argmax")
 

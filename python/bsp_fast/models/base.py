@@ -46,6 +46,16 @@ def present_joints(targets: torch.Tensor) -> torch.Tensor:
     return present
 
 
+def activation_layout(fmt=None):
+    """The memory layout an image network's activations take: ``fmt`` (a module's
+    ``MEMORY_FORMAT``), or for None NCHW under CPU bf16 autocast and channels_last
+    otherwise (GroupNorm's channels_last CPU kernels are slow in bf16; docs/performance.md,
+    "The pose networks' activation layout")."""
+    if fmt is not None:
+        return fmt
+    return torch.contiguous_format if torch.is_autocast_enabled("cpu") else torch.channels_last
+
+
 class BaseModel(nn.Module):
     """Base of all models. Subclasses are registered with
     :func:`bsp_fast.models.register`, declare their hyper-parameters as keyword-only

@@ -6,7 +6,8 @@ import torch
 from torch import nn
 
 from .. import skeleton as _sk
-from .base import PoseEstimationModel, check_choice, check_float, check_int
+from .base import (PoseEstimationModel, activation_layout, check_choice, check_float,
+                   check_int)
 from .registry import register
 
 __all__ = ["PoseCNN", "soft_argmax"]
@@ -102,7 +103,7 @@ class PoseCNN(PoseEstimationModel):
     def compute(self, inputs, visible):
         B, L, _, S, _ = inputs.shape
         x = inputs.reshape(B * L, 3, S, S)  # a view for the datasets' channels-last crops
-        x = x.contiguous(memory_format=MEMORY_FORMAT)
+        x = x.contiguous(memory_format=activation_layout(MEMORY_FORMAT))
         x = (x.to(torch.get_autocast_dtype("cpu") if torch.is_autocast_enabled("cpu")
                   else torch.float32) * (1.0 / (255 * _STD)) - _MEAN / _STD)
         f2 = self.stage2(self.stage1(self.stem(x)))

@@ -31,7 +31,8 @@ from torch import nn
 from torch.nn import functional as F
 
 from .. import skeleton as _sk
-from .base import PoseEstimationModel, check_choice, check_float, check_int
+from .base import (PoseEstimationModel, activation_layout, check_choice, check_float,
+                   check_int)
 from .pose_cnn import soft_argmax
 from .registry import register
 
@@ -263,12 +264,10 @@ class PoseTemporal(PoseEstimationModel):
             raise ValueError(f"{self.name}: the crop size {S} must be a multiple of "
                              f"2**depth = {2 ** self.depth} (depth={self.depth}); e.g. "
                              "crop sizes 64, 96 and 128 with depth 4 or 5")
-        low = torch.is_autocast_enabled("cpu")
-        fmt = MEMORY_FORMAT if MEMORY_FORMAT is not None else (
-            torch.contiguous_format if low else torch.channels_last)
-        x = inputs.reshape(B * L, 3, S, S).contiguous(memory_format=fmt)
-        x = (x.to(torch.get_autocast_dtype("cpu") if low else torch.float32)
-             * (1.0 / (255 * _STD)) - _MEAN / _STD)
+        x = inputs.reshape(B * L, 3, S, S).contiguous(
+            memory_format=activation_layout(MEMORY_FORMAT))
+        x = (x.to(torch.get_autocast_dtype("cpu") if torch.is_autocast_enabled("cpu")
+                  else torch.float32) * (1.0 / (255 * _STD)) - _MEAN / _STD)
         skips = [self.stem(x)]
         for stage in self.down:
             skips.append(stage(skips[-1]))

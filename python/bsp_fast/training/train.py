@@ -252,7 +252,7 @@ def _precision(cfg: dict, module, dm) -> tuple:
             steps.append(time_steps(module.net, ds[list(range(n))]))
         return steps[0](bf16)
 
-    model_key = (f"{cfg['task']}/{cfg['model']} "  # + a code change that moved its speed:
+    model_key = (f"{cfg['task']}/{cfg['model']} "  # "speed N": its step times changed
                  f"{json.dumps(module.hparams['hparams'], sort_keys=True, default=str)} "
                  f"batch {n}" + (f" speed {r}" if (r := module.net.speed_revision) else ""))
     return decide_precision(cfg["precision"], cfg["accelerator"], module.net, probe=probe,
