@@ -4,7 +4,13 @@ the median training step in float32 and in bf16 autocast, the ratio, the pick an
 probe's own time. A fresh cache each run (nothing is read from or written to the user's).
 
     PYTHONPATH=python python3 benchmarks/bench_precision_probe.py [--threads 1]
-        [--models classification/lstm lifting/poseformer ...]
+        [--models classification/lstm lifting/poseformer ...] [--device cuda]
+        [--fixtures DIR]
+
+``--device cuda`` times the same steps on the GPU (wall time, the queue drained at each
+reading) and prints the ratio beside what ``auto`` picks there (bf16 on any GPU that has
+it, unmeasured). ``--fixtures DIR`` keeps the fixture clip files there (made if missing),
+so that a machine without the C++ core, which makes them, can run on copies.
 """
 from __future__ import annotations
 
@@ -18,15 +24,21 @@ import time
 MODELS = [("classification/lstm", 64, 16), ("classification/pedestrian_graph", 64, 16),
           ("autoencoder/simple_transformer", 32, 30), ("lifting/baseline_3d", 64, 16),
           ("lifting/lstm", 64, 16), ("lifting/lstm_relative_rot", 64, 16),
-          ("lifting/poseformer", 16, 16), ("pose_estimation/pose_cnn", 8, 4)]
+          ("lifting/poseformer", 16, 16), ("pose_estimation/pose_cnn", 8, 4),
+          ("pose_estimation/pose_temporal", 4, 30)]
+
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--models", nargs="+", default=[m for m, _, _ in MODELS])
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
+    p.add_argument("--fixtures", help="folder of the fixture clip files (made if missing)")
     args = p.parse_args(argv)
     tmp = tempfile.mkdtemp(prefix="bench_precision_")
+    fixtures = args.fixtures or tmp
+    os.makedirs(fixtures, exist_ok=True)
     os.environ["BSP_PRECISION_PROBE"] = "1"
     os.environ["BSP_PRECISION_CACHE"] = os.path.join(tmp, "precision.json")
     import torch
@@ -41,12 +53,18 @@ def main(argv=None) -> int:
     print(f"CPU {P.cpu_summary()}; bf16: {', '.join(native) or 'none (AVX2 only)'}; "
           f"{args.threads} thread(s); "
           f"torch {torch.__version__}; load average {os.getloadavg()[0]:.1f}")
-    print("| model | batch | auto picks | why | probe s |\n|---|---|---|---|---|")
+    gpu = args.device == "cuda"
+    if gpu:
+        print(f"GPU {torch.cuda.get_device_name()}; bf16 {torch.cuda.is_bf16_supported()}")
+        print("| model | batch | float32 ms/step | bf16 ms/step | float32 / bf16 | auto picks "
+              "| probe s |\n|---|---|---|---|---|---|---|")
+    else:
+        print("| model | batch | auto picks | why | probe s |\n|---|---|---|---|---|")
     for name, batch_size, length in MODELS:
         if name not in args.models:
             continue
         task, model = name.split("/")
-        h5 = os.path.join(tmp, f"{task}-{length}.h5")
+        h5 = os.path.join(fixtures, f"{task}-{length}.h5")
         if not os.path.exists(h5):
             media = task == "pose_estimation"
             write_clip_file(h5, clips=(max(batch_size, 16), 4, 4), clip_length=length,
@@ -56,6 +74,18 @@ def main(argv=None) -> int:
         torch.manual_seed(0)
         net = models.create(task, model)
         t0 = time.perf_counter()
+        if gpu:
+            try:
+                probe = P.time_steps(net, batch, device="cuda")
+                f32, b16 = probe(False), probe(True)
+            except Exception as exc:  # the other models still run; the error is the row
+                print(f"| {name} | {batch_size} | failed: {type(exc).__name__}: {exc} |")
+                continue
+            got, _ = P.decide_precision("auto", "gpu", net, probe=probe,
+                                        key=f"{name} batch {batch_size} on the GPU")
+            print(f"| {name} | {batch_size} | {f32 * 1e3:.1f} | {b16 * 1e3:.1f} | "
+                  f"x{f32 / b16:.2f} | {got} | {time.perf_counter() - t0:.1f} |", flush=True)
+            continue
         got, why = P.decide_precision("auto", "cpu", net, probe=P.time_steps(net, batch),
                                       key=f"{name} batch {batch_size}")
         print(f"| {name} | {batch_size} | {got} | {why} | {time.perf_counter() - t0:.1f} |",

@@ -5,7 +5,7 @@ batches with validation at the tables' cadence (once per epoch, the whole val sp
 
     PYTHONPATH=python python3 benchmarks/bench_train_loop.py [--epochs 2]
         [--models lifting/poseformer ...] [--modes eager32 eager_bf16 compiled32 ...]
-        [--json out.json]
+        [--json out.json] [--fixtures DIR] [--accelerator gpu]
 
 The plain loop is what a user would write: ``ClipDataset`` batches in a seeded random
 order, the model's own loss and ``configure_optimizers`` (AdamW and its scheduler),
@@ -21,7 +21,10 @@ first update + the budget's updates x the steady seconds per update. ``--repeat 
 N runs per process, one after the other (a ``bsp-reproduce`` worker trains a table's
 seeds so, paying the imports once); ``cpu_s`` is the process's CPU seconds, imports
 included, which unlike wall time does not depend on the share of the cores a process got
-on a loaded machine.
+on a loaded machine. ``--accelerator gpu`` trains on the GPU (batches moved there as a
+user's loop would, each step timed to the drained queue; ``bsp-train`` with
+``accelerator="gpu"``); ``--fixtures DIR`` keeps the generated clip files there (made if
+missing), so that a machine without the C++ core, which makes them, can run on copies.
 """
 from __future__ import annotations
 
@@ -46,18 +49,28 @@ MODES = ("eager32", "eager_bf16", "compiled32", "compiled_bf16", "bsp_train32",
 
 def _plain(job) -> dict:
     """One plain-loop run in this (fresh) process; returns its timings."""
-    name, batch, h5, epochs, mode, t_start, updates = job
+    name, batch, h5, epochs, mode, t_start, updates, accelerator = job
     import torch
 
     from bsp_fast import models
     from bsp_fast.data import ClipDataset
 
     torch.set_num_threads(1)
+    dev = "cuda" if accelerator == "gpu" else "cpu"
+
+    def to(b):
+        return {k: v.to(dev, non_blocking=True) if isinstance(v, torch.Tensor) else v
+                for k, v in b.items()} if dev != "cpu" else b
+
+    def clock() -> float:
+        if dev != "cpu":
+            torch.cuda.synchronize()  # the step's kernels done, not only queued
+        return time.perf_counter()
     task, model = name.split("/")
     bf16 = mode.endswith("bf16")
     train, val = ClipDataset(h5, "train", task), ClipDataset(h5, "val", task)
     torch.manual_seed(1)
-    net = models.create(task, model)
+    net = models.create(task, model).to(dev)
     if mode.startswith("compiled"):
         net.compute = torch.compile(net.compute, dynamic=False)  # as bsp-train --compile on
     opt = net.configure_optimizers(lr=None)
@@ -70,32 +83,32 @@ def _plain(job) -> dict:
         for i in range(0, len(order), batch):  # the last batch may be short, as in bsp-train
             if updates and len(step_s) == updates:
                 break
-            t = time.perf_counter()
-            b = train[order[i:i + batch]]
-            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            t = clock()
+            b = to(train[order[i:i + batch]])
+            with torch.autocast(dev, dtype=torch.bfloat16, enabled=bf16):
                 loss = net.loss(net.forward_batch(b), b)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
-            step_s.append(time.perf_counter() - t)
-        t = time.perf_counter()
+            step_s.append(clock() - t)
+        t = clock()
         net.eval()
         total, n = 0.0, 0
-        with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+        with torch.no_grad(), torch.autocast(dev, dtype=torch.bfloat16, enabled=bf16):
             for i in range(0, len(val), batch):
-                b = val[list(range(i, min(i + batch, len(val))))]
+                b = to(val[list(range(i, min(i + batch, len(val))))])
                 k = len(b["inputs"])
                 total += float(net.loss(net.forward_batch(b), b)) * k
                 n += k
         val_loss = total / n
-        val_s += time.perf_counter() - t
-    t = time.perf_counter()  # the test split scored once, as bsp-train does
+        val_s += clock() - t
+    t = clock()  # the test split scored once, as bsp-train does
     test = ClipDataset(h5, "test", task)
-    with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+    with torch.no_grad(), torch.autocast(dev, dtype=torch.bfloat16, enabled=bf16):
         for i in range(0, len(test), batch):
-            b = test[list(range(i, min(i + batch, len(test))))]
+            b = to(test[list(range(i, min(i + batch, len(test))))])
             net.loss(net.forward_batch(b), b)
-    val_s += time.perf_counter() - t
+    val_s += clock() - t
     steady = step_s[2:] or step_s
     return {"first_s": step_s[0], "step_s": sum(steady) / len(steady), "updates": len(step_s),
             "val_s": val_s, "val_loss": val_loss, "clips_per_s": batch / (sum(steady) / len(steady)),
@@ -103,15 +116,15 @@ def _plain(job) -> dict:
 
 
 def _bsp_train(job) -> dict:
-    name, batch, h5, epochs, mode, t_start, updates = job
+    name, batch, h5, epochs, mode, t_start, updates, accelerator = job
     import bsp_fast
 
     task, model = name.split("/")
-    out = os.path.join(os.path.dirname(h5), f"run-{task}-{model}-{mode}")
+    out = os.path.join(os.path.dirname(h5), f"run-{task}-{model}-{mode}-{accelerator}")
     t = time.perf_counter()
     res = bsp_fast.train(task, model, data=h5, out=out, epochs=epochs, batch_size=batch,
                          precision="bf16-mixed" if mode.endswith("bf16") else "32",
-                         threads=1, early_stop=0, seed=1, accelerator="cpu", force=True,
+                         threads=1, early_stop=0, seed=1, accelerator=accelerator, force=True,
                          max_steps=updates or 0)
     fit = time.perf_counter() - t
     return {"fit_s": fit, "total_s": time.time() - t_start,
@@ -144,6 +157,8 @@ def main(argv=None) -> int:
                    help="runs per process (a bsp-reproduce worker trains a table's seeds "
                         "one after the other in one process): imports are paid once")
     p.add_argument("--json", help="append one JSON line per (model, mode) to this file")
+    p.add_argument("--fixtures", help="folder of the generated clip files (made if missing)")
+    p.add_argument("--accelerator", choices=("cpu", "gpu"), default="cpu")
     args = p.parse_args(argv)
     from bsp_fast.data.testing import write_clip_file
     from bsp_fast.models.lstm import cpu_bf16
@@ -153,28 +168,41 @@ def main(argv=None) -> int:
     print(f"CPU: {cpu_summary()}; bf16 autocast native: {cpu_bf16()}; "
           f"load average {os.getloadavg()[0]:.2f}; {args.train_clips} train clips, "
           f"{args.epochs} epochs, one thread per process", flush=True)
-    if not cpu_bf16():
+    if args.accelerator == "gpu":
+        import torch
+
+        print(f"GPU: {torch.cuda.get_device_name()}; torch {torch.__version__}", flush=True)
+    elif not cpu_bf16():
         args.modes = [m for m in args.modes if not m.endswith("bf16")]
-    tmp = tempfile.mkdtemp(prefix="bench_train_loop_")
+    tmp = args.fixtures or tempfile.mkdtemp(prefix="bench_train_loop_")
+    os.makedirs(tmp, exist_ok=True)
     ctx = mp.get_context("spawn")
     print("| model | batch | mode | clips/s (steady) | first update s | fit s | process s | "
           "process CPU s | val loss | quick-budget train s (projected) |\n"
           "|---|---|---|---|---|---|---|---|---|---|")
-    rows = []
+    rows, failed = [], 0
     for name, batch, length, quick_updates in MODELS:
         if name not in args.models:
             continue
         n = args.train_clips if batch >= 32 else args.train_clips // 2
-        h5 = os.path.join(tmp, f"{name.replace('/', '-')}.h5")
-        write_clip_file(h5, clips=(n, n // 4, n // 4), clip_length=length,
-                        frames_per_recording=8 * length, seed=1, rotations=False)
+        h5 = os.path.join(tmp, f"{name.replace('/', '-')}-{n}.h5")
+        if not os.path.exists(h5):
+            write_clip_file(h5, clips=(n, n // 4, n // 4), clip_length=length,
+                            frames_per_recording=8 * length, seed=1, rotations=False)
         for mode in args.modes:
             with ctx.Pool(1) as pool:  # a fresh process: imports and start-up counted
                 steps = -(-n // batch)
                 epochs = -(-args.updates // steps) if args.updates else args.epochs
-                r = pool.apply(_run, ((name, batch, h5, epochs, mode, time.time(), args.updates),
-                                      args.repeat))
-            r.update(model=name, batch=batch, mode=mode, load=os.getloadavg()[0])
+                try:
+                    r = pool.apply(_run, ((name, batch, h5, epochs, mode, time.time(),
+                                           args.updates, args.accelerator), args.repeat))
+                except Exception as exc:  # the other rows still run; the error is the row
+                    print(f"| {name} | {batch} | {mode} | failed: {type(exc).__name__}: "
+                          f"{exc} |", flush=True)
+                    failed += 1
+                    continue
+            r.update(model=name, batch=batch, mode=mode, load=os.getloadavg()[0],
+                     accelerator=args.accelerator)
             if "step_s" in r:
                 r["project_quick_s"] = r["first_s"] + (quick_updates - 1) * r["step_s"]
             rows.append(r)
@@ -187,7 +215,7 @@ def main(argv=None) -> int:
                 with open(args.json, "a") as f:
                     f.write(json.dumps(r) + "\n")
     print(f"load average {os.getloadavg()[0]:.2f} at the end")
-    return 0
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

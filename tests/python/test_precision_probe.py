@@ -52,6 +52,30 @@ def test_the_probe_decides_caches_and_says_why(probe_on, monkeypatch):
     assert got == "32" and "no native bf16" in why and calls == []
 
 
+def test_a_gpu_is_probed_too(probe_on, monkeypatch):
+    """On an H100 bf16 autocast was slower for every model here (x0.68-0.98): a GPU with
+    bf16 is measured like a CPU, and without bf16 gets float32 unmeasured. (CI has no GPU:
+    torch.cuda's answers are stood in; benchmarks/gpu_check.sh ran the real probe there.)"""
+    import torch
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "is_bf16_supported", lambda: True)
+    calls = []
+    got, why = P.decide_precision("auto", "gpu", None, probe=_fake(1.0, 1.2, calls), key="g")
+    assert got == "32" and "probe on this GPU" in why and "x0.83" in why
+    assert calls == [False, True] and json.loads(probe_on.read_text())["g"]["precision"] == "32"
+    got, why = P.decide_precision("auto", "auto", None, probe=_fake(1.0, 0.5, []), key="g2")
+    assert got == "bf16-mixed" and "this GPU" in why
+    monkeypatch.setenv("BSP_PRECISION_PROBE", "0")
+    assert P.decide_precision("auto", "gpu", None, probe=_fake(1.0, 9.0, []),
+                              key="g3")[0] == "bf16-mixed"
+    monkeypatch.setenv("BSP_PRECISION_PROBE", "1")
+    monkeypatch.setattr(torch.cuda, "is_bf16_supported", lambda: False)
+    calls = []
+    got, why = P.decide_precision("auto", "gpu", None, probe=_fake(1.0, 0.1, calls), key="g4")
+    assert got == "32" and "without bf16" in why and calls == []
+
+
 def test_the_probe_off_falls_back_on_the_models_policy(monkeypatch):
     import bsp_fast.models.lstm as lstm
     from bsp_fast import models
@@ -262,3 +286,33 @@ def test_bench_seed_layout_smoke(capsys, monkeypatch):
     rows = [line for line in capsys.readouterr().out.splitlines()
             if line.startswith("| classification/lstm | 64 |")]
     assert len(rows) == 1 and float(rows[0].rstrip(" |").rsplit("|", 1)[1]) > 0
+
+
+def test_gpu_check_prepare_records_the_cores_answers(tmp_path):
+    """benchmarks/gpu_check.sh prepare: the stand-in for the C++ core (on a machine without
+    its libraries) holds the core's constants and its answers for the calls that building
+    the models makes, and raises on any other call; fixtures are packed."""
+    import importlib.util
+    import subprocess
+    from pathlib import Path
+
+    import numpy as np
+
+    from bsp_fast import _core, geometry, skeleton
+
+    root = Path(__file__).resolve().parents[2]
+    subprocess.run(["bash", str(root / "benchmarks" / "gpu_check.sh"), "prepare",
+                    str(tmp_path)], check=True, capture_output=True)
+    assert (tmp_path / "fixtures.tar.gz").stat().st_size > 0
+    spec = importlib.util.spec_from_file_location("stub", tmp_path / "bsp_fast" / "_core.py")
+    stub = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(stub)
+    assert stub.JOINT_NAMES == list(_core.JOINT_NAMES) and stub.PARENTS == list(_core.PARENTS)
+    rel = np.ascontiguousarray(skeleton.reference_pose("sk_kid"), dtype=np.float64)
+    par = np.asarray(_core.PARENTS, dtype=np.int32)
+    np.testing.assert_array_equal(stub.forward_kinematics(rel, None, 1, par),
+                                  geometry.forward_kinematics(rel))
+    with pytest.raises(RuntimeError, match=r"no C\+\+ core"):
+        stub.forward_kinematics(rel + 1.0, None, 1, par)
+    with pytest.raises(RuntimeError, match=r"no C\+\+ core"):
+        stub.ConvertStage()

@@ -1,12 +1,14 @@
 """``--precision``: what ``auto`` picks, decided on this machine, and the warning for bf16
 on a CPU without bf16 instructions (docs/training.md, "Precision").
 
-``auto`` is bf16-mixed on a GPU that supports bf16. On a CPU without native bf16 (no
-AVX512-BF16/AMX: bf16 is emulated there, measured 5-17x slower) it is float32 for every
-model. On a CPU with native bf16 it is decided per (model, CPU model, thread count, torch
-version) by a short timed probe of the run's own model on one of its own train batches:
+``auto`` is float32 on a GPU without bf16 and on a CPU without native bf16 (no
+AVX512-BF16/AMX: bf16 is emulated there, measured 5-17x slower). On a GPU with bf16 (where
+the small models here ran x0.68-0.98 slower in bf16 autocast on an H100) and on a CPU with
+native bf16 it is decided per (model, CPU or GPU model, thread count, torch version) by a
+short timed probe of the run's own model on one of its own train batches:
 a few training steps (forward, loss, backward, optimiser step) in float32 and in bf16
-autocast, alternating, timed in CPU time with one thread (wall time with more), on copies
+autocast, alternating, timed in CPU time with one thread (wall time with more or on a
+GPU), on copies
 of the network (the run's weights and random state are untouched); bf16-mixed when its
 median step is at least 10 % faster. The answer is cached
 in ``$XDG_CACHE_HOME/bsp_fast/precision.json`` (``~/.cache``; ``BSP_PRECISION_CACHE``
@@ -41,7 +43,7 @@ def resolve_precision(precision: str, accelerator: str, model=None) -> str:
     """``auto`` -> bf16-mixed on a GPU that supports it; on a CPU with native bf16
     (AVX512-BF16/AMX) bf16-mixed for a ``model`` (class or instance) whose
     ``cpu_bf16_faster`` is set (measured faster there); else 32. Without a probe: what a
-    run falls back on (:func:`decide_precision` probes)."""
+    run falls back on (:func:`decide_precision` probes, on a GPU too)."""
     return decide_precision(precision, accelerator, model)[0]
 
 
@@ -55,14 +57,20 @@ def decide_precision(precision: str, accelerator: str, model=None, *, probe=None
     import torch
 
     gpu = accelerator == "gpu" or (accelerator == "auto" and torch.cuda.is_available())
+    probing = probe is not None and key is not None and os.environ.get(
+        "BSP_PRECISION_PROBE", "1") != "0"
     if gpu and torch.cuda.is_available() and torch.cuda.is_bf16_supported():
-        return "bf16-mixed", "auto: a GPU with bf16"
+        # measured, as on a CPU: the small models here ran x0.58-0.94 slower under bf16
+        # autocast on an H100 (launch-bound: autocast adds casts, saves little arithmetic)
+        if probing:
+            return _probed(key, probe, "this GPU")
+        return "bf16-mixed", "auto: a GPU with bf16 (the probe is off)"
     if gpu:
         return "32", "auto: a GPU without bf16"
     if not native_bf16("cpu"):
         return "32", ("auto: this CPU has no native bf16 (no AVX512-BF16/AMX), where bf16 "
                       "is emulated and several times slower")
-    if probe is None or key is None or os.environ.get("BSP_PRECISION_PROBE", "1") == "0":
+    if not probing:
         faster = bool(getattr(model, "cpu_bf16_faster", False))
         return ("bf16-mixed" if faster else "32"), (
             "auto: native bf16; the model's measured policy (cpu_bf16_faster="
@@ -105,14 +113,15 @@ def probe_cache_path() -> Path:
     return base / "bsp_fast" / "precision.json"
 
 
-def probe_key(model_key: str, threads: int) -> str:
+def probe_key(model_key: str, threads: int, device: str = "cpu") -> str:
     """What a probe's answer holds for: the model (task/name and hyper-parameters), the CPU
-    model, the thread count and torch's version."""
+    model (or the GPU's, ``device="cuda"``), the thread count and torch's version."""
     import torch
 
+    where = _cpu_name() if device == "cpu" else torch.cuda.get_device_name()
     # "probe 2": steps alternating and timed by probe_clock; answers of the first probe
     # (each precision's steps in a row, wall time) are not reused
-    return (f"{model_key} | {_cpu_name()} | {threads} thread(s) | torch {torch.__version__}"
+    return (f"{model_key} | {where} | {threads} thread(s) | torch {torch.__version__}"
             " | probe 2")
 
 
@@ -124,7 +133,7 @@ def _read_cache(path: Path) -> dict:
     return doc if isinstance(doc, dict) else {}
 
 
-def _probed(key: str, probe) -> tuple:
+def _probed(key: str, probe, where: str = "this CPU") -> tuple:
     """Under an exclusive lock beside the cache: runs started together (bsp-reproduce's
     seeds in parallel processes) wait for the first one's probe and read its answer, so
     the seeds of a row never train in different precisions (nor time each other)."""
@@ -139,16 +148,17 @@ def _probed(key: str, probe) -> tuple:
             fcntl.flock(lock, fcntl.LOCK_EX)
         except OSError:
             pass  # no lock where none can be made: each run probes for itself
-        return _probed_locked(path, key, probe)
+        return _probed_locked(path, key, probe, where)
 
 
-def _probed_locked(path: Path, key: str, probe) -> tuple:
+def _probed_locked(path: Path, key: str, probe, where: str = "this CPU") -> tuple:
     cached = _read_cache(path).get(key)
     if isinstance(cached, dict) and cached.get("precision") in ("32", "bf16-mixed"):
         return cached["precision"], cached.get("reason", "") + f" (cached in {path})"
     fp32, bf16 = probe(False), probe(True)
     pick = "bf16-mixed" if bf16 <= MARGIN * fp32 else "32"
-    reason = (f"auto: probe on this CPU, median step ({probe_clock()[1]}) float32 "
+    clock = probe_clock()[1] if where == "this CPU" else "wall time"
+    reason = (f"auto: probe on {where}, median step ({clock}) float32 "
               f"{fp32 * 1e3:.1f} ms, bf16 {bf16 * 1e3:.1f} ms (x{fp32 / bf16:.2f}); bf16 "
               f"needs x{1 / MARGIN:.2f}")
     try:  # a cache that cannot be written only costs the next run its probe
@@ -177,22 +187,31 @@ def probe_clock() -> tuple:
     return time.perf_counter, "wall time"
 
 
-def time_steps(net, batch: dict, steps: int = _STEPS, warmup: int = _WARMUP):
+def time_steps(net, batch: dict, steps: int = _STEPS, warmup: int = _WARMUP,
+               device: str = "cpu"):
     """A probe for :func:`decide_precision`: ``bf16 -> median seconds`` of training steps
     (forward, loss, backward, SGD step) of a copy of ``net`` on ``batch``, timed by
     :func:`probe_clock`; the caller's weights and random state are untouched. The first
     call measures both precisions, their steps alternating (float32, bf16, float32, ...),
     so that a change of the machine's load during the probe falls on both alike; later
-    calls return those medians."""
+    calls return those medians. ``device="cuda"``: the copies and the batch moved there,
+    wall time with the GPU's queue drained before each reading."""
     import copy
 
     import torch
 
-    clock = probe_clock()[0]
+    if device != "cpu":
+        batch = {k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in batch.items()}
+
+        def clock() -> float:
+            torch.cuda.synchronize()
+            return time.perf_counter()
+    else:
+        clock = probe_clock()[0]
 
     def step(model, opt, bf16: bool) -> float:
         t0 = clock()
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+        with torch.autocast(device, dtype=torch.bfloat16, enabled=bf16):
             loss = model.loss(model.forward_batch(batch), batch)
         opt.zero_grad(set_to_none=True)
         loss.float().backward()
@@ -202,10 +221,10 @@ def time_steps(net, batch: dict, steps: int = _STEPS, warmup: int = _WARMUP):
     medians: dict = {}
 
     def measure() -> None:
-        with torch.random.fork_rng(devices=[]):
+        with torch.random.fork_rng(devices=[] if device == "cpu" else None):
             pairs = []
             for bf16 in (False, True):  # a copy per precision: their caches stay apart
-                model = copy.deepcopy(net).train()
+                model = copy.deepcopy(net).to(device).train()
                 pairs.append((model, torch.optim.SGD(
                     [p for p in model.parameters() if p.requires_grad], lr=0.0)))
             firsts = [step(m, o, bf16) for (m, o), bf16 in zip(pairs, (False, True))]

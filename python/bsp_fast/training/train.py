@@ -235,28 +235,28 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
 
 def _precision(cfg: dict, module, dm) -> tuple:
     """``(precision, why)`` of the run: ``--precision`` as given, or ``auto`` decided on
-    this machine (a CPU with native bf16: a short probe of this model on one of its train
-    batches, cached per model, CPU and thread count; .precision)."""
+    this machine (a CPU with native bf16 or a GPU: a short probe of this model on one of its
+    train batches, cached per model, CPU or GPU and thread count; .precision)."""
     import json
 
     import torch
 
     from .precision import decide_precision, probe_key, time_steps
-
     ds = dm.datasets["train"]
     n = min(cfg["batch_size"], len(ds))
     steps = []  # the batch is read only when a probe runs (auto, native bf16, not cached)
+    device = "cuda" if cfg["accelerator"] != "cpu" and torch.cuda.is_available() else "cpu"
 
     def probe(bf16: bool) -> float:
         if not steps:
-            steps.append(time_steps(module.net, ds[list(range(n))]))
+            steps.append(time_steps(module.net, ds[list(range(n))], device=device))
         return steps[0](bf16)
 
     model_key = (f"{cfg['task']}/{cfg['model']} "  # "speed N": its step times changed
                  f"{json.dumps(module.hparams['hparams'], sort_keys=True, default=str)} "
                  f"batch {n}" + (f" speed {r}" if (r := module.net.speed_revision) else ""))
     return decide_precision(cfg["precision"], cfg["accelerator"], module.net, probe=probe,
-                            key=probe_key(model_key, torch.get_num_threads()))
+                            key=probe_key(model_key, torch.get_num_threads(), device))
 
 
 def _inputs(cfg: dict, resume, config_path=None) -> list:
