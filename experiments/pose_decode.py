@@ -17,8 +17,8 @@ soft-argmax.
     python experiments/pose_decode.py RUNS/pose_estimation-quick --row pose_temporal \\
         --out DIR
 
-Writes ``DIR/pose_decode.json`` and ``.md``, a seed at a time (``--resume`` keeps the
-seeds done).
+Writes ``DIR/pose_decode.json`` and ``.md`` (``pose_decode-ROW.*`` for another row than
+pose_temporal), a seed at a time (``--resume`` keeps the seeds done).
 """
 from __future__ import annotations
 
@@ -145,7 +145,8 @@ def main(argv=None) -> int:
     if not runs:
         sys.exit(f"pose_decode: no {a.runs / a.row}/seed-* run folders")
     a.out.mkdir(parents=True, exist_ok=True)
-    path = a.out / "pose_decode.json"
+    stem = "pose_decode" if a.row == "pose_temporal" else f"pose_decode-{a.row}"
+    path = a.out / f"{stem}.json"
     done = json.loads(path.read_text(encoding="utf-8"))["per_seed"] if (
         a.resume and path.is_file()) else {}
     worst = 0.0
@@ -165,7 +166,7 @@ def main(argv=None) -> int:
                "command": portable_command("experiments/pose_decode.py",
                                            sys.argv[1:] if argv is None else argv)}
         write_text(path, json.dumps(doc, indent=1))
-        write_text(a.out / "pose_decode.md", render(doc))
+        write_text(a.out / f"{stem}.md", render(doc))
         print(f"seed {seed}: " + ", ".join(
             f"{LABELS[d]} {done[seed][d]['metrics']['pck_0.05']:.4f}" for d in DECODES),
             flush=True)
