@@ -8,8 +8,7 @@ probe's own time. A fresh cache each run (nothing is read from or written to the
         [--fixtures DIR]
 
 ``--device cuda`` times the same steps on the GPU (wall time, the queue drained at each
-reading) and prints the ratio beside what ``auto`` picks there (bf16 on any GPU that has
-it, unmeasured). ``--fixtures DIR`` keeps the fixture clip files there (made if missing),
+reading) and prints both medians, their ratio and what ``auto``'s probe picks there. ``--fixtures DIR`` keeps the fixture clip files there (made if missing),
 so that a machine without the C++ core, which makes them, can run on copies.
 """
 from __future__ import annotations
@@ -26,7 +25,6 @@ MODELS = [("classification/lstm", 64, 16), ("classification/pedestrian_graph", 6
           ("lifting/lstm", 64, 16), ("lifting/lstm_relative_rot", 64, 16),
           ("lifting/poseformer", 16, 16), ("pose_estimation/pose_cnn", 8, 4),
           ("pose_estimation/pose_temporal", 4, 30)]
-
 
 
 def main(argv=None) -> int:

@@ -60,8 +60,8 @@ def decide_precision(precision: str, accelerator: str, model=None, *, probe=None
     probing = probe is not None and key is not None and os.environ.get(
         "BSP_PRECISION_PROBE", "1") != "0"
     if gpu and torch.cuda.is_available() and torch.cuda.is_bf16_supported():
-        # measured, as on a CPU: the small models here ran x0.58-0.94 slower under bf16
-        # autocast on an H100 (launch-bound: autocast adds casts, saves little arithmetic)
+        # measured, as on a CPU: the probe's steps of the small models here ran x0.68-0.98
+        # as fast under bf16 autocast on an H100 (docs/performance.md)
         if probing:
             return _probed(key, probe, "this GPU")
         return "bf16-mixed", "auto: a GPU with bf16 (the probe is off)"
