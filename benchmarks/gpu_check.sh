@@ -2,7 +2,7 @@
 # #36's training benchmarks on a lent GPU machine (docs/performance.md, "Another CPU and a
 # GPU"): its CPU is a second kind of CPU, its GPU the accelerator the full budgets name.
 #
-#   bash benchmarks/gpu_check.sh prepare DIR   # here, with the C++ core built
+#   bash benchmarks/gpu_check.sh prepare DIR   # here, with the C++ core built ($PYTHON)
 #   bash benchmarks/gpu_check.sh run DIR OUT   # there (DIR carried along)
 #
 # That machine has Python and PyTorch but not the Debian libraries the C++ core links, and
@@ -20,7 +20,7 @@ cmd=$1 dir=$2
 cd "$(dirname "$0")/.."
 if [ "$cmd" = prepare ]; then
   mkdir -p "$dir/bsp_fast" "$dir/fixtures" "$dir/wheels"
-  PYTHONPATH=python:benchmarks python3 - "$dir" <<'EOF'
+  PYTHONPATH=python:benchmarks "${PYTHON:-python3}" - "$dir" <<'EOF'
 import hashlib, os, sys
 import numpy as np
 from bsp_fast import _core
@@ -100,6 +100,7 @@ EOF
   (cd "$dir/fixtures" && md5sum ./*.h5 | sort | awk '$1 == p {print f, $2; next} {p = $1; f = $2}' |
      while read -r a b; do ln -f "$a" "$b"; done)
   tar czf "$dir/fixtures.tar.gz" -C "$dir" fixtures && rm -rf "$dir/fixtures"
+  [ -n "${GPU_CHECK_NO_WHEEL:-}" ] && exit 0  # (the tests: no network needed)
   python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 \
     --implementation cp -d "$dir/wheels" "jsonargparse==$(python3 -c 'import jsonargparse as j; print(j.__version__)')" \
     || echo "gpu_check: no jsonargparse wheel (offline?): the bsp-train rows will fail there" >&2

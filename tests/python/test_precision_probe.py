@@ -301,8 +301,12 @@ def test_gpu_check_prepare_records_the_cores_answers(tmp_path):
     from bsp_fast import _core, geometry, skeleton
 
     root = Path(__file__).resolve().parents[2]
+    import os
+    import sys
+
     subprocess.run(["bash", str(root / "benchmarks" / "gpu_check.sh"), "prepare",
-                    str(tmp_path)], check=True, capture_output=True)
+                    str(tmp_path)], check=True, capture_output=True,
+                   env=dict(os.environ, PYTHON=sys.executable, GPU_CHECK_NO_WHEEL="1"))
     assert (tmp_path / "fixtures.tar.gz").stat().st_size > 0
     spec = importlib.util.spec_from_file_location("stub", tmp_path / "bsp_fast" / "_core.py")
     stub = importlib.util.module_from_spec(spec)
