@@ -2,9 +2,8 @@
 channels_last (the ``MEMORY_FORMAT`` of ``bsp_fast.models.pose_temporal`` and
 ``pose_cnn``; the "default" column is what each uses), float32 and bf16 autocast, one
 thread: forward, loss, backward and AdamW on random crops at the quick budget's batch (4
-clips x 30 frames). The formats are timed
-in turn (ABAB...) so that a change of load hits both; the median step's process CPU time
-is reported, with the ratio channels_last / NCHW.
+clips x 30 frames). The formats are timed in turn (ABAB...) so that a change of load hits
+both; the median step's process CPU time is reported, with the ratio channels_last / NCHW.
 
     PYTHONPATH=python python3 benchmarks/bench_memory_format.py [--crop 64] [--steps 6]
         [--models pose_temporal pose_cnn]

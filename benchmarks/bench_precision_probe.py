@@ -27,6 +27,19 @@ MODELS = [("classification/lstm", 64, 16), ("classification/pedestrian_graph", 6
           ("pose_estimation/pose_temporal", 4, 30)]
 
 
+def fixture(folder: str, name: str, batch_size: int, length: int) -> str:
+    """The fixture clip file of ``name``'s task and clip length in ``folder`` (made if
+    missing; benchmarks/gpu_check.sh makes them ahead for a machine without the core)."""
+    from bsp_fast.data.testing import write_clip_file
+
+    task = name.split("/")[0]
+    h5 = os.path.join(folder, f"{task}-{length}.h5")
+    if not os.path.exists(h5):
+        write_clip_file(h5, clips=(max(batch_size, 16), 4, 4), clip_length=length,
+                        media=task == "pose_estimation", crop_size=64, seed=1)
+    return h5
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--threads", type=int, default=1)
@@ -43,7 +56,6 @@ def main(argv=None) -> int:
 
     from bsp_fast import models
     from bsp_fast.data import ClipDataset
-    from bsp_fast.data.testing import write_clip_file
     from bsp_fast.training import precision as P
 
     torch.set_num_threads(args.threads)
@@ -62,12 +74,7 @@ def main(argv=None) -> int:
         if name not in args.models:
             continue
         task, model = name.split("/")
-        h5 = os.path.join(fixtures, f"{task}-{length}.h5")
-        if not os.path.exists(h5):
-            media = task == "pose_estimation"
-            write_clip_file(h5, clips=(max(batch_size, 16), 4, 4), clip_length=length,
-                            media=media, crop_size=64, seed=1)
-        ds = ClipDataset(h5, "train", task)
+        ds = ClipDataset(fixture(fixtures, name, batch_size, length), "train", task)
         batch = ds[list(range(min(batch_size, len(ds))))]
         torch.manual_seed(0)
         net = models.create(task, model)

@@ -144,6 +144,19 @@ def _run(job, repeat: int = 1):
     return dict(first, total_s=time.time() - job[5], repeat=repeat, cpu_s=time.process_time())
 
 
+def clip_file(folder: str, name: str, batch: int, length: int, train_clips: int) -> str:
+    """The generated clip file of ``name`` for ``--train-clips`` in ``folder`` (made if
+    missing; benchmarks/gpu_check.sh makes them ahead for a machine without the core)."""
+    from bsp_fast.data.testing import write_clip_file
+
+    n = train_clips if batch >= 32 else train_clips // 2
+    h5 = os.path.join(folder, f"{name.replace('/', '-')}-{n}.h5")
+    if not os.path.exists(h5):
+        write_clip_file(h5, clips=(n, n // 4, n // 4), clip_length=length,
+                        frames_per_recording=8 * length, seed=1, rotations=False)
+    return h5
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--epochs", type=int, default=4)
@@ -160,7 +173,6 @@ def main(argv=None) -> int:
     p.add_argument("--fixtures", help="folder of the generated clip files (made if missing)")
     p.add_argument("--accelerator", choices=("cpu", "gpu"), default="cpu")
     args = p.parse_args(argv)
-    from bsp_fast.data.testing import write_clip_file
     from bsp_fast.models.lstm import cpu_bf16
 
     from bsp_fast.training.precision import cpu_summary
@@ -185,10 +197,7 @@ def main(argv=None) -> int:
         if name not in args.models:
             continue
         n = args.train_clips if batch >= 32 else args.train_clips // 2
-        h5 = os.path.join(tmp, f"{name.replace('/', '-')}-{n}.h5")
-        if not os.path.exists(h5):
-            write_clip_file(h5, clips=(n, n // 4, n // 4), clip_length=length,
-                            frames_per_recording=8 * length, seed=1, rotations=False)
+        h5 = clip_file(tmp, name, batch, length, args.train_clips)
         for mode in args.modes:
             with ctx.Pool(1) as pool:  # a fresh process: imports and start-up counted
                 steps = -(-n // batch)

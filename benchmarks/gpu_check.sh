@@ -25,7 +25,6 @@ import hashlib, os, sys
 import numpy as np
 from bsp_fast import _core
 import bench_precision_probe as P, bench_train_loop as L
-from bsp_fast.data.testing import write_clip_file
 d = sys.argv[1]
 consts = {n: getattr(_core, n) for n in dir(_core)
           if not n.startswith("__") and not callable(getattr(_core, n))}
@@ -83,18 +82,10 @@ with open(os.path.join(d, "bsp_fast", "_core.py"), "w") as f:
             "        return np.array(hit[2], dtype=hit[1]).reshape(hit[0])\n"
             "    return absent\n")
 fx = os.path.join(d, "fixtures")
-for name, batch, length, _ in L.MODELS:  # bench_train_loop --train-clips 512
-    n = 512 if batch >= 32 else 256
-    h5 = os.path.join(fx, f"{name.replace('/', '-')}-{n}.h5")
-    if not os.path.exists(h5):
-        write_clip_file(h5, clips=(n, n // 4, n // 4), clip_length=length,
-                        frames_per_recording=8 * length, seed=1, rotations=False)
+for name, batch, length, _ in L.MODELS:  # what `run` passes: --train-clips 512
+    L.clip_file(fx, name, batch, length, 512)
 for name, batch, length in P.MODELS:
-    task = name.split("/")[0]
-    h5 = os.path.join(fx, f"{task}-{length}.h5")
-    if not os.path.exists(h5):
-        write_clip_file(h5, clips=(max(batch, 16), 4, 4), clip_length=length,
-                        media=task == "pose_estimation", crop_size=64, seed=1)
+    P.fixture(fx, name, batch, length)
 EOF
   # identical files (same generator arguments) as hard links: tar stores them once
   (cd "$dir/fixtures" && md5sum ./*.h5 | sort | awk '$1 == p {print f, $2; next} {p = $1; f = $2}' |

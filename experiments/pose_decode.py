@@ -9,10 +9,10 @@ pose_temporal's loss is the soft-argmax's whatever ``decode`` is, so the ablatio
 ``dark`` row (a training with ``hp: {decode: dark}``) would repeat these trainings step for
 step and pick the same checkpoints; scoring the table's own checkpoints twice answers it
 without training again. The decoding each run was tabled with (its ``hp``) must reproduce
-its ``metrics.json`` (checked, printed). Per metric: the difference DARK - soft-argmax over seeds and test
-recordings (the tables' two-level bootstrap, t method; the decodings are the same runs,
-so seeds and recordings are drawn together), for DARK and for the flip each against the
-soft-argmax.
+its ``metrics.json`` (checked, printed). Per metric: the difference DARK - soft-argmax over
+seeds and test recordings (the tables' two-level bootstrap, t method; the decodings are
+the same runs, so seeds and recordings are drawn together), for DARK and for the flip
+each against the soft-argmax.
 
     python experiments/pose_decode.py RUNS/pose_estimation-quick --row pose_temporal \\
         --out DIR

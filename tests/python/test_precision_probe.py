@@ -293,7 +293,9 @@ def test_gpu_check_prepare_records_the_cores_answers(tmp_path):
     its libraries) holds the core's constants and its answers for the calls that building
     the models makes, and raises on any other call; fixtures are packed."""
     import importlib.util
+    import os
     import subprocess
+    import sys
     from pathlib import Path
 
     import numpy as np
@@ -301,9 +303,6 @@ def test_gpu_check_prepare_records_the_cores_answers(tmp_path):
     from bsp_fast import _core, geometry, skeleton
 
     root = Path(__file__).resolve().parents[2]
-    import os
-    import sys
-
     subprocess.run(["bash", str(root / "benchmarks" / "gpu_check.sh"), "prepare",
                     str(tmp_path)], check=True, capture_output=True,
                    env=dict(os.environ, PYTHON=sys.executable, GPU_CHECK_NO_WHEEL="1"))

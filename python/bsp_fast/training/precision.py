@@ -3,14 +3,13 @@ on a CPU without bf16 instructions (docs/training.md, "Precision").
 
 ``auto`` is float32 on a GPU without bf16 and on a CPU without native bf16 (no
 AVX512-BF16/AMX: bf16 is emulated there, measured 5-17x slower). On a GPU with bf16 (where
-the small models here ran x0.68-0.98 slower in bf16 autocast on an H100) and on a CPU with
-native bf16 it is decided per (model, CPU or GPU model, thread count, torch version) by a
-short timed probe of the run's own model on one of its own train batches:
-a few training steps (forward, loss, backward, optimiser step) in float32 and in bf16
-autocast, alternating, timed in CPU time with one thread (wall time with more or on a
-GPU), on copies
-of the network (the run's weights and random state are untouched); bf16-mixed when its
-median step is at least 10 % faster. The answer is cached
+the small models here ran at x0.68-0.98 of float32's speed in bf16 autocast on an H100)
+and on a CPU with native bf16 it is decided per (model, CPU or GPU model, thread count,
+torch version) by a short timed probe of the run's own model on one of its own train
+batches: a few training steps (forward, loss, backward, optimiser step) in float32 and in
+bf16 autocast, alternating, timed in CPU time with one thread (wall time with more, or on
+a GPU), on copies of the network (the run's weights and random state are untouched);
+bf16-mixed when its median step is at least 10 % faster. The answer is cached
 in ``$XDG_CACHE_HOME/bsp_fast/precision.json`` (``~/.cache``; ``BSP_PRECISION_CACHE``
 names another file), so a machine decides once and every later run there agrees, and
 each run records what was picked and why in its ``config.yaml`` (``resolved:
