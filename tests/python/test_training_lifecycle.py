@@ -161,6 +161,39 @@ def test_mid_epoch_checkpoint_resumes_exactly(clips, uninterrupted, tmp_path, mo
     assert train_main(["--resume", str(out), "--quiet"]) == 0
     assert _test_metrics(out) == uninterrupted.metrics
 
+@pytest.mark.parametrize("caps", [["--max-steps", "340", "--early-stop", "20"],
+                                  ["--early-stop", "20"]])
+def test_kill_9_after_an_epoch_end_checkpoint_with_update_cap_and_early_stop(clips, tmp_path,
+                                                                            caps):
+    # the matched-updates rows' settings: Lightning resumed an epoch-end checkpoint of a
+    # run with max_steps by re-running the epoch's end hooks, and EarlyStopping raised
+    # ("val/loss ... not available"): such a run could not be resumed at all
+    whole = tmp_path / "whole"
+    proc = _start(clips, whole, "--checkpoint-every", "0", *caps)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    out = tmp_path / "run"
+    proc = _start(clips, out, "--checkpoint-every", "0", *caps)  # epoch-end saves only
+    tmp = _wait_for_training(out, proc, epoch=4)
+    proc.kill()
+    proc.communicate(timeout=60)
+    marker = runs_mod.read_marker(tmp)
+    ckpt = torch.load(tmp / "checkpoints" / "last.ckpt", weights_only=True)
+    assert marker["state"] == "running" and marker["batches_done"] == 6  # an epoch's end
+    assert ckpt["global_step"] == marker["step"] == 6 * marker["epoch"]  # epochs done
+    res = subprocess.run([sys.executable, "-m", "bsp_fast", "train", "--resume", str(out),
+                          "--quiet"], env=_env(), capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    a = json.loads((whole / "metrics.json").read_text())
+    b = json.loads((out / "metrics.json").read_text())
+    assert (b["test"], b["best_epoch"], b["epochs"]) == (a["test"], a["best_epoch"], a["epochs"])
+    assert a["epochs"] < EPOCHS  # early stopping ended both, at the same epoch
+    wa = torch.load(whole / "checkpoints" / "last.ckpt", weights_only=True)
+    wb = torch.load(out / "checkpoints" / "last.ckpt", weights_only=True)
+    assert wa["global_step"] == wb["global_step"]
+    assert all(torch.equal(wa["state_dict"][k], wb["state_dict"][k]) for k in wa["state_dict"])
+
+
 
 def test_full_disk_message(clips, tmp_path, monkeypatch, capsys):
     out = tmp_path / "run"

@@ -31,7 +31,7 @@ from lightning.pytorch.callbacks import Callback
 
 from ..atomic import write_bytes
 from .config import parse_duration  # re-exported: the option's parser
-from .runs import write_marker
+from .runs import epoch_end_as_completed, write_marker
 
 __all__ = ["Interrupted", "OutputWriteError", "CheckpointWriteError", "AtomicCheckpointIO",
            "Lifecycle", "signals", "parse_duration", "epochs_note", "test_checkpoint"]
@@ -188,6 +188,8 @@ class Lifecycle(Callback):
             checkpoint["bsp_train_loss"] = {k: v.clone() for k, v in loss.metric_state.items()}
 
     def on_load_checkpoint(self, trainer, pl_module, checkpoint) -> None:
+        # before Lightning restores its loops from the same dict (callbacks load first)
+        epoch_end_as_completed(checkpoint)
         loss = getattr(pl_module, "train_loss", None)
         for k, v in (checkpoint.get("bsp_train_loss") or {}).items():
             if loss is not None:

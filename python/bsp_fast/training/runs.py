@@ -22,7 +22,8 @@ from ..atomic import DATASET_FILES, check_outputs, publish, temp_path, write_tex
 __all__ = ["RunDirectory", "RunError", "default_run_dir", "resolve_checkpoint", "read_run",
            "ENV_TMP", "MARKER", "write_marker", "read_marker", "orphaned_runs",
            "resume_hint", "resumable", "is_temporary", "refuse_unsafe_output",
-           "check_run_outputs", "run_inputs", "checkpoint_info", "open_run"]
+           "check_run_outputs", "run_inputs", "checkpoint_info", "open_run",
+           "epoch_end_as_completed"]
 
 #: Set by the process that created the temporary run directory, so DDP processes that
 #: Lightning starts later (they re-run the command) write into the same directory.
@@ -342,6 +343,44 @@ def _finite(obj):
     return obj
 
 
+def epoch_end_as_completed(checkpoint: dict) -> bool:
+    """Marks a ``last.ckpt`` written at an epoch's end (``epoch_end``: after the epoch's
+    validation, best.ckpt and early stopping) as a completed epoch; True if it was one.
+
+    Lightning resumes such a checkpoint by running the epoch's end hooks again when the run
+    has ``max_steps`` (it then always counts as restarting). Their validation metrics are
+    not in the checkpoint, so EarlyStopping raised ("val/loss ... not available") and no
+    run with both ``--max-steps`` and ``--early-stop`` could be resumed; it would also have
+    counted the epoch twice. Without ``max_steps`` Lightning already treats it as completed.
+    With the epoch completed and the batch counters of the epoch in progress at zero, both
+    cases start the next epoch exactly as the uninterrupted run did."""
+    loops = (checkpoint.get("loops") or {}).get("fit_loop")
+    if not loops or "epoch_progress" not in loops:
+        return False
+    epochs = loops["epoch_progress"]
+    t = epochs["total"]
+    if not (t["ready"] == t["started"] == t["processed"] == t["completed"] + 1):
+        return False  # saved mid-epoch, or an epoch already completed
+    batches = loops.get("epoch_loop.batch_progress") or {}
+    if not batches.get("is_last_batch"):
+        return False  # not our epoch-end save: leave it to Lightning
+    for part in ("total", "current"):
+        epochs[part]["completed"] = epochs[part]["processed"]
+    # what Lightning's reset at the start of an epoch does (reset_on_run); the totals stay
+    for key in ("epoch_loop.batch_progress", "epoch_loop.scheduler_progress"):
+        if key in loops:
+            loops[key]["current"] = dict.fromkeys(loops[key]["current"], 0)
+    batches["is_last_batch"] = False
+    optim = loops.get("epoch_loop.automatic_optimization.optim_progress")
+    if optim:
+        for tracker in optim["optimizer"].values():
+            tracker["current"] = dict.fromkeys(tracker["current"], 0)
+    val = loops.get("epoch_loop.val_loop.batch_progress")
+    if val:
+        val["total"] = dict.fromkeys(val["total"], 0)
+    return True
+
+
 # ---------------------------------------------------------------------- opening a run
 def checkpoint_info(ckpt_path) -> dict:
     """The saved hyper-parameters of a bsp-train checkpoint (task, model, hparams, lr,
@@ -362,6 +401,11 @@ def checkpoint_info(ckpt_path) -> dict:
     info = dict(hp)
     info["epoch"] = ckpt.get("epoch")
     info["global_step"] = ckpt.get("global_step")
+    # Lightning's current_epoch once --resume restores it: an epoch-end last.ckpt counts its
+    # epoch as completed (the dict here is a copy)
+    epoch_end_as_completed(ckpt)
+    progress = ((ckpt.get("loops") or {}).get("fit_loop") or {}).get("epoch_progress")
+    info["restored_epoch"] = progress["current"]["completed"] if progress else info["epoch"]
     return info
 
 

@@ -62,7 +62,7 @@ def resolve_config(cli: dict, config_path=None) -> tuple:
         cfg.update(C.normalise(known, f"{target} (saved config)"))
         orphan = run_dir is not None and is_temporary(run_dir)
         resume = {"ckpt": Path(ckpt), "run_dir": run_dir, "orphan": orphan,
-                  "epoch": info.get("epoch")}  # Lightning's current_epoch at the save
+                  "epoch": info.get("restored_epoch")}  # Lightning's current_epoch
         if orphan:  # a killed run: it goes to the --out it was started with
             cfg["out"] = (read_marker(run_dir) or {}).get("out") or resolved.get("out")
         for key in ("task", "model"):
