@@ -163,6 +163,64 @@ def test_a_run_records_what_auto_picked_and_why_and_bsp_eval_uses_it(probe_on, t
     assert evaluate(run.run_dir, "test").config["precision"] == res["precision"]
 
 
+def test_the_key_names_the_cpus_flags_and_its_kernels_isa(monkeypatch):
+    """A virtual machine's model name ("AMD EPYC") is the same on AVX2-only and AVX512-BF16
+    generations: the key also holds the flags and the ISA torch's kernels use, so an
+    answer cached on one is not reused on the other (nor under ATEN_CPU_CAPABILITY or
+    ONEDNN_MAX_CPU_ISA, which lower that ISA on the same CPU)."""
+    import torch
+
+    monkeypatch.setattr(P, "_cpu_name", lambda: "AMD EPYC")
+    monkeypatch.delenv("ONEDNN_MAX_CPU_ISA", raising=False)
+    monkeypatch.delenv("DNNL_MAX_CPU_ISA", raising=False)
+    keys = {}
+    for flags, isa in ((["avx2", "avx512f", "avx512_bf16"], "AVX512"), (["avx2"], "AVX2")):
+        monkeypatch.setattr(P, "cpu_flags", lambda f=flags: f)
+        monkeypatch.setattr(torch.backends.cpu, "get_cpu_capability", lambda i=isa: i)
+        keys[isa] = P.probe_key("classification/lstm {} batch 64", 1)
+    assert keys["AVX512"] != keys["AVX2"]
+    assert "AMD EPYC [avx2 avx512f avx512_bf16; kernels AVX512]" in keys["AVX512"]
+    monkeypatch.setenv("ONEDNN_MAX_CPU_ISA", "AVX2")
+    assert P.probe_key("classification/lstm {} batch 64", 1) != keys["AVX2"]
+    assert "oneDNN AVX2" in P.probe_key("classification/lstm {} batch 64", 1)
+
+
+def test_a_resumed_run_keeps_the_precision_auto_picked_at_its_start(probe_on, tmp_path):
+    """Its auto answer is not asked again: a probe could now answer otherwise (here the
+    cache is gone and the models' policy says the opposite) and switch the precision in
+    the middle of the run. --precision given on --resume still overrides."""
+    from bsp_fast.training.train import main as train_main
+
+    h5 = tmp_path / "c.h5"
+    write_clip_file(h5, clips=(16, 4, 4), clip_length=8, seed=1)
+    out = tmp_path / "run"
+    args = ["lifting", "baseline_3d", "--data", str(h5), "--out", str(out), "--epochs", "1",
+            "--batch-size", "8", "--quiet", "--hp", "linear_size=32", "--hp", "num_blocks=1"]
+    assert train_main(args) == 0
+    cfg = yaml.safe_load((out / "config.yaml").read_text())
+    started = cfg["resolved"]["precision"]
+    other = "32" if started == "bf16-mixed" else "bf16-mixed"
+    # as an interrupted run whose auto had picked the other precision
+    cfg["resolved"]["precision"] = other
+    cfg["resolved"]["precision_reason"] = "auto: probe on this CPU (a stand-in answer)"
+    (out / "config.yaml").write_text(yaml.safe_dump(cfg))
+    probe_on.unlink(missing_ok=True)
+    kept = P.kept_precision(cfg)
+    assert kept == (other, "auto, kept from the run's start: auto: probe on this CPU "
+                           "(a stand-in answer)")
+    assert P.kept_precision(dict(cfg, resolved=dict(cfg["resolved"],
+                                                    precision_reason=kept[1]))) == kept
+    assert P.kept_precision(dict(cfg, precision="32")) is None  # not auto: as given
+    assert train_main(["--resume", str(out), "--epochs", "2", "--quiet"]) == 0
+    res = yaml.safe_load((out / "config.yaml").read_text())["resolved"]
+    assert (res["precision"], res["precision_reason"]) == kept
+    assert json.loads((out / "metrics.json").read_text())["precision"] == other
+    assert not probe_on.exists()  # nothing was probed
+    assert train_main(["--resume", str(out), "--epochs", "3", "--quiet",
+                       "--precision", "32"]) == 0
+    assert yaml.safe_load((out / "config.yaml").read_text())["resolved"]["precision"] == "32"
+
+
 @pytest.mark.skipif(not NATIVE, reason="the probe runs on CPUs with native bf16 only")
 def test_a_models_speed_revision_makes_the_probe_measure_again(probe_on, tmp_path,
                                                                monkeypatch):

@@ -2,20 +2,21 @@
 on a CPU without bf16 instructions (docs/training.md, "Precision").
 
 ``auto`` is float32 on a GPU without bf16 and on a CPU without native bf16 (no
-AVX512-BF16/AMX: bf16 is emulated there, measured 5-17x slower). On a GPU with bf16 (where
-the small models here ran at x0.68-0.98 of float32's speed in bf16 autocast on an H100)
-and on a CPU with native bf16 it is decided per (model, CPU or GPU model, thread count,
-torch version) by a short timed probe of the run's own model on one of its own train
-batches: a few training steps (forward, loss, backward, optimiser step) in float32 and in
-bf16 autocast, alternating, timed in CPU time with one thread (wall time with more, or on
-a GPU), on copies of the network (the run's weights and random state are untouched);
-bf16-mixed when its median step is at least 10 % faster. The answer is cached
-in ``$XDG_CACHE_HOME/bsp_fast/precision.json`` (``~/.cache``; ``BSP_PRECISION_CACHE``
-names another file), so a machine decides once and every later run there agrees, and
-each run records what was picked and why in its ``config.yaml`` (``resolved:
-precision_reason``). ``BSP_PRECISION_PROBE=0`` turns the probe off: then the models'
-``cpu_bf16_faster`` attributes (the earlier measurements) decide. ``--precision`` set to
-anything but ``auto`` is used as given.
+AVX512-BF16/AMX: bf16 is emulated there, measured 5-17x slower). On a GPU with bf16
+(where the small models here ran at x0.68-0.98 of float32's speed in bf16 autocast on an
+H100) and on a CPU with native bf16 it is decided per (model, CPU or GPU model, thread
+count, torch version; a CPU by its model name, flags and kernels' ISA) by a short timed
+probe of the run's own model on one of its own train batches: a few training steps
+(forward, loss, backward, optimiser step) in float32 and in bf16 autocast, alternating,
+timed in CPU time with one thread (wall time with more, or on a GPU), on copies of the
+network (the run's weights and random state are untouched); bf16-mixed when its median
+step is at least 10 % faster. The answer is cached in
+``$XDG_CACHE_HOME/bsp_fast/precision.json`` (``~/.cache``; ``BSP_PRECISION_CACHE`` names
+another file), so a machine decides once and every later run there agrees, and each run
+records what was picked and why in its ``config.yaml`` (``resolved: precision_reason``);
+a resumed run keeps that answer. ``BSP_PRECISION_PROBE=0`` turns the probe off: then the
+models' ``cpu_bf16_faster`` attributes (the earlier measurements) decide.
+``--precision`` set to anything but ``auto`` is used as given.
 """
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ from pathlib import Path
 
 __all__ = ["resolve_precision", "decide_precision", "native_bf16", "check_precision",
            "probe_cache_path", "probe_key", "probe_clock", "time_steps", "MARGIN", "cpu_flags",
-           "cpu_summary"]
+           "cpu_summary", "cpu_kernels", "kept_precision", "run_model_key"]
 
 #: the CPU flags that decide bf16's speed on a CPU, as benchmarks report them
 SPEED_FLAGS = ("avx2", "avx512f", "avx512_bf16", "amx_bf16", "amx_tile")
@@ -104,6 +105,32 @@ def cpu_summary() -> str:
     return f"{_cpu_name()}; {' '.join(cpu_flags()) or 'none of ' + ' '.join(SPEED_FLAGS)}"
 
 
+def cpu_kernels() -> str:
+    """The CPU as a probe's answer depends on it: its model name, its bf16-relevant flags
+    and the instruction set torch's kernels use (``ATEN_CPU_CAPABILITY`` and oneDNN's
+    ``ONEDNN_MAX_CPU_ISA`` can lower it). The model name alone is not enough: a virtual
+    machine's can be just "AMD EPYC" on AVX2-only and on AVX512-BF16 generations, and an
+    answer cached on one must not be reused on the other (bf16 5-17x slower there)."""
+    import torch
+
+    isa = os.environ.get("ONEDNN_MAX_CPU_ISA") or os.environ.get("DNNL_MAX_CPU_ISA")
+    return (f"{_cpu_name()} [{' '.join(cpu_flags()) or '-'}; kernels "
+            f"{torch.backends.cpu.get_cpu_capability()}{f', oneDNN {isa}' if isa else ''}]")
+
+
+def kept_precision(saved: dict):
+    """``(precision, why)`` a resumed run keeps: the one its ``auto`` picked when it
+    started (its config.yaml's ``resolved``), or None. Asking again could answer otherwise
+    (another machine, a cleared cache, a probe near its margin) and change the precision
+    in the middle of the run."""
+    resolved = (saved or {}).get("resolved") or {}
+    pick, why = resolved.get("precision"), resolved.get("precision_reason") or ""
+    if (saved or {}).get("precision") != "auto" or pick not in ("32", "bf16-mixed"):
+        return None
+    prefix = "auto, kept from the run's start: "
+    return pick, why if why.startswith(prefix) else prefix + why
+
+
 def probe_cache_path() -> Path:
     given = os.environ.get("BSP_PRECISION_CACHE")
     if given:
@@ -112,12 +139,20 @@ def probe_cache_path() -> Path:
     return base / "bsp_fast" / "precision.json"
 
 
+def run_model_key(cfg: dict, hparams: dict, batch: int, speed_revision=None) -> str:
+    """The model part of a run's :func:`probe_key`: task/model, hyper-parameters, batch
+    size and the model's ``speed_revision`` ("speed N": its step times changed)."""
+    return (f"{cfg['task']}/{cfg['model']} {json.dumps(hparams, sort_keys=True, default=str)} "
+            f"batch {batch}" + (f" speed {speed_revision}" if speed_revision else ""))
+
+
 def probe_key(model_key: str, threads: int, device: str = "cpu") -> str:
     """What a probe's answer holds for: the model (task/name and hyper-parameters), the CPU
-    model (or the GPU's, ``device="cuda"``), the thread count and torch's version."""
+    (:func:`cpu_kernels`; or the GPU's model, ``device="cuda"``), the thread count and
+    torch's version."""
     import torch
 
-    where = _cpu_name() if device == "cpu" else torch.cuda.get_device_name()
+    where = cpu_kernels() if device == "cpu" else torch.cuda.get_device_name()
     # "probe 2": steps alternating and timed by probe_clock; answers of the first probe
     # (each precision's steps in a row, wall time) are not reused
     return (f"{model_key} | {where} | {threads} thread(s) | torch {torch.__version__}"

@@ -18,7 +18,7 @@ from ..atomic import OutputOverlapError, atomic_output, refuse, remove
 from .runs import ENV_TMP, MARKER, RunDirectory, RunError, checkpoint_info, default_run_dir, \
     is_temporary, open_run, read_marker, read_run, refuse_unsafe_output, resume_hint, \
     write_json, write_marker
-from .precision import check_precision, native_bf16, resolve_precision
+from .precision import check_precision, kept_precision, native_bf16, resolve_precision
 from .setup import make_datamodule, make_trainer, prepare_data, rank as _rank
 from .tasks import TASKS, get_task
 
@@ -62,7 +62,8 @@ def resolve_config(cli: dict, config_path=None) -> tuple:
         cfg.update(C.normalise(known, f"{target} (saved config)"))
         orphan = run_dir is not None and is_temporary(run_dir)
         resume = {"ckpt": Path(ckpt), "run_dir": run_dir, "orphan": orphan,
-                  "epoch": info.get("restored_epoch")}  # Lightning's current_epoch
+                  "epoch": info.get("restored_epoch"),  # Lightning's current_epoch
+                  "precision": kept_precision(saved)}  # auto's answer at its start
         if orphan:  # a killed run: it goes to the --out it was started with
             cfg["out"] = (read_marker(run_dir) or {}).get("out") or resolved.get("out")
         for key in ("task", "model"):
@@ -138,7 +139,7 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
         module.net.compute = torch.compile(module.net.compute, dynamic=False)
     dm = make_datamodule(cfg)
     prepare_data(dm, convert=not child)
-    precision, why = _precision(cfg, module, dm)
+    precision, why = _precision(cfg, module, dm, resume)
     check_precision(precision, cfg["accelerator"])
     ckpt_path = None
     if resume is not None:
@@ -233,15 +234,16 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
     return result
 
 
-def _precision(cfg: dict, module, dm) -> tuple:
-    """``(precision, why)`` of the run: ``--precision`` as given, or ``auto`` decided on
-    this machine (a CPU with native bf16 or a GPU: a short probe of this model on one of its
-    train batches, cached per model, CPU or GPU and thread count; .precision)."""
-    import json
-
+def _precision(cfg: dict, module, dm, resume=None) -> tuple:
+    """``(precision, why)`` of the run: ``--precision`` as given, a resumed run's ``auto``
+    as it started (.precision.kept_precision), or ``auto`` decided on this machine (a CPU
+    with native bf16 or a GPU: a short probe of this model on one of its train batches,
+    cached per model, CPU or GPU and thread count; .precision)."""
     import torch
 
-    from .precision import decide_precision, probe_key, time_steps
+    from .precision import decide_precision, probe_key, run_model_key, time_steps
+    if cfg["precision"] == "auto" and (resume or {}).get("precision"):
+        return resume["precision"]
     ds = dm.datasets["train"]
     n = min(cfg["batch_size"], len(ds))
     steps = []  # the batch is read only when a probe runs (auto, native bf16, not cached)
@@ -252,11 +254,9 @@ def _precision(cfg: dict, module, dm) -> tuple:
             steps.append(time_steps(module.net, ds[list(range(n))], device=device))
         return steps[0](bf16)
 
-    model_key = (f"{cfg['task']}/{cfg['model']} "  # "speed N": its step times changed
-                 f"{json.dumps(module.hparams['hparams'], sort_keys=True, default=str)} "
-                 f"batch {n}" + (f" speed {r}" if (r := module.net.speed_revision) else ""))
+    key = run_model_key(cfg, module.hparams["hparams"], n, module.net.speed_revision)
     return decide_precision(cfg["precision"], cfg["accelerator"], module.net, probe=probe,
-                            key=probe_key(model_key, torch.get_num_threads(), device))
+                            key=probe_key(key, torch.get_num_threads(), device))
 
 
 def _inputs(cfg: dict, resume, config_path=None) -> list:
