@@ -5,7 +5,7 @@ probe's own time. A fresh cache each run (nothing is read from or written to the
 
     PYTHONPATH=python python3 benchmarks/bench_precision_probe.py [--threads 1]
         [--models classification/lstm lifting/poseformer ...] [--device cuda]
-        [--fixtures DIR]
+        [--fixtures DIR] [--steps]
 
 ``--device cuda`` times the same steps on the GPU (wall time, the queue drained at each
 reading) and prints both medians, their ratio and what ``auto``'s probe picks there. ``--fixtures DIR`` keeps the fixture clip files there (made if missing),
@@ -46,6 +46,10 @@ def main(argv=None) -> int:
     p.add_argument("--models", nargs="+", default=[m for m, _, _ in MODELS])
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--fixtures", help="folder of the fixture clip files (made if missing)")
+    p.add_argument("--steps", action="store_true",
+                   help="CPU: also time the probe's steps where auto does not probe (a CPU "
+                        "without native bf16, or kernels held to AVX2 by ONEDNN_MAX_CPU_ISA "
+                        "and ATEN_CPU_CAPABILITY): float32 and bf16 ms/step and their ratio")
     args = p.parse_args(argv)
     tmp = tempfile.mkdtemp(prefix="bench_precision_")
     fixtures = args.fixtures or tmp
@@ -68,6 +72,9 @@ def main(argv=None) -> int:
         print(f"GPU {torch.cuda.get_device_name()}; bf16 {torch.cuda.is_bf16_supported()}")
         print("| model | batch | float32 ms/step | bf16 ms/step | float32 / bf16 | auto picks "
               "| probe s |\n|---|---|---|---|---|---|---|")
+    elif args.steps:
+        print("| model | batch | auto picks | why | float32 ms/step | bf16 ms/step | "
+              "float32 / bf16 |\n|---|---|---|---|---|---|---|")
     else:
         print("| model | batch | auto picks | why | probe s |\n|---|---|---|---|---|")
     for name, batch_size, length in MODELS:
@@ -91,8 +98,14 @@ def main(argv=None) -> int:
             print(f"| {name} | {batch_size} | {f32 * 1e3:.1f} | {b16 * 1e3:.1f} | "
                   f"x{f32 / b16:.2f} | {got} | {time.perf_counter() - t0:.1f} |", flush=True)
             continue
-        got, why = P.decide_precision("auto", "cpu", net, probe=P.time_steps(net, batch),
+        probe = P.time_steps(net, batch)
+        got, why = P.decide_precision("auto", "cpu", net, probe=probe,
                                       key=f"{name} batch {batch_size}")
+        if args.steps:  # the probe's medians (measured now if auto did not probe)
+            f32, b16 = probe(False), probe(True)
+            print(f"| {name} | {batch_size} | {got} | {why} | {f32 * 1e3:.1f} | "
+                  f"{b16 * 1e3:.1f} | x{f32 / b16:.2f} |", flush=True)
+            continue
         print(f"| {name} | {batch_size} | {got} | {why} | {time.perf_counter() - t0:.1f} |",
               flush=True)
     print(f"load average {os.getloadavg()[0]:.1f} at the end")

@@ -306,6 +306,15 @@ def test_bench_precision_probe_smoke(monkeypatch, capsys):
     row = [line for line in out.splitlines() if line.startswith("| lifting/lstm |")]
     assert len(row) == 1 and ("bf16-mixed" in row[0] or "| 32 |" in row[0])
     assert ("probe on this CPU" in row[0]) == NATIVE
+    # --steps: the medians too, measured even where auto does not probe
+    try:
+        assert bench.main(["--models", "lifting/lstm", "--steps"]) == 0
+    finally:
+        torch.set_num_threads(threads)
+    row = [line for line in capsys.readouterr().out.splitlines()
+           if line.startswith("| lifting/lstm |")][0].strip("| ").split(" | ")
+    f32, b16, ratio = float(row[-3]), float(row[-2]), float(row[-1].lstrip("x"))
+    assert f32 > 0 and b16 > 0 and ratio == pytest.approx(f32 / b16, rel=0.05, abs=0.01)
 
 
 def test_parallel_runs_wait_for_one_probe(probe_on):
