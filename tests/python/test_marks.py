@@ -386,3 +386,23 @@ def test_the_seed_rule_binds_each_comparison_of_an_ordering(tmp_path):
     f = order(["lstm", "poseformer", "baseline_3d"])  # both comparisons name PoseFormer
     assert f["status"] == "inconclusive"
     assert f["rule"] == "fewer than 5 seeds (poseformer: 3)"
+
+
+def test_a_row_whose_seeds_trained_in_different_precisions_is_named(tmp_path):
+    """--precision auto decides per machine: seeds added later elsewhere can differ from a
+    row's first ones. The table says which rows and seeds; rows that agree are not named."""
+    a = np.arange(1.0, 6.0)[:, None] + np.zeros((1, 12))
+    tab = _lifting([_compare("lstm", "poseformer")])
+    res = _write(tmp_path, tab, {"lstm": a, "poseformer": a + 1})
+    for s, v in res["results"]["lstm"]["seeds"].items():
+        v["precision"] = "bf16-mixed" if int(s) < 3 else "32"
+    for v in res["results"]["poseformer"]["seeds"].values():
+        v["precision"] = "bf16-mixed"
+    text = R.format_table(tab, res, E.evaluate_findings(tab, res))
+    line = [ln for ln in text.splitlines() if ln.startswith("Precision:")]
+    assert len(line) == 1
+    assert line[0].endswith("lstm (32: seeds 3, 4; bf16-mixed: seeds 0, 1, 2).")
+    assert "poseformer" not in line[0]
+    for v in res["results"]["lstm"]["seeds"].values():
+        v["precision"] = "bf16-mixed"
+    assert "Precision:" not in R.format_table(tab, res, E.evaluate_findings(tab, res))

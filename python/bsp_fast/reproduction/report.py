@@ -20,7 +20,7 @@ from .protocol import finding_label, mark_exploratory, protocol_lines
 from .table_files import settings_cells, table_header
 
 __all__ = ["format_report", "format_table", "findings_of", "write_report", "results_table",
-           "status_text", "marks_note"]
+           "status_text", "marks_note", "precision_note"]
 
 
 def _md(header, rows) -> str:
@@ -110,6 +110,27 @@ SMOKE_BANNER = ("> **smoke budget: plumbing only.** One epoch of two batches per
                 "numbers and the marks below say nothing about the models or the report.")
 
 
+def precision_note(res: dict):
+    """The line naming the rows whose seeds trained in different precisions, or None.
+    ``--precision auto`` decides per machine (a run keeps its answer when resumed, and a
+    row's seeds started together share one), so seeds added later on another machine, or
+    after the probe's cache was cleared, can differ from the row's first ones."""
+    mixed = []
+    for name, r in (res.get("results") or {}).items():
+        by: dict = {}
+        for seed, v in (r.get("seeds") if isinstance(r.get("seeds"), dict) else {}).items():
+            by.setdefault(str(v.get("precision") or "not recorded"), []).append(str(seed))
+        if len(by) > 1:
+            mixed.append(f"{name} (" + "; ".join(f"{p}: seeds {', '.join(ss)}"
+                                                   for p, ss in sorted(by.items())) + ")")
+    if not mixed:
+        return None
+    return ("Precision: these rows' seeds trained in different precisions (what `--precision "
+            "auto` picked where and when each ran; bf16 autocast stays within each model's "
+            "stated tolerance of float32, and the row's spread over seeds includes the "
+            "difference): " + "; ".join(mixed) + ".")
+
+
 def format_table(tab: dict, res: dict, findings: list) -> str:
     """Markdown of a table and its ``findings``: one run per row (``res["seeds"]`` None) or
     cells ``mean ± std [95 % interval]`` over seeds, with the findings' differences,
@@ -134,6 +155,8 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
                  "(seeds only)", "P(a beats b)", "report", "status (Holm-adjusted p)"],
                 [[finding_label(f), f["ours"], _improvement(f), f["report"], status_text(f)]
                  for f in findings]), "", marks_note(findings, res["budget"])]
+    if (note := precision_note(res)) is not None:
+        text += ["", note]
     return "\n".join(text + protocol_lines(tab, res)) + "\n"
 
 
