@@ -2,7 +2,9 @@
 """Rows of two tables' runs compared on the same test split: e.g. each classification row
 at the original's batch size 1 (``classification_batch1``) against the same row at batch
 64 (``classification``), where the two tables differ only in the batch size and its
-update count.
+update count. A row given as ``A:B`` compares row A of the first folder with row B of
+the second, which may be the same folder (e.g. an ablation's ``lstm-s0-m0`` against its
+``lstm-s0-m0-upd``).
 
     python3 experiments/cross_table.py --a runs/classification-quick \\
         --b runs/classification_batch1-quick --metric f1 \\
@@ -32,21 +34,25 @@ def _results(folder: Path) -> dict:
 
 
 def compare(a_dir: Path, b_dir: Path, rows: list, metric: str) -> list:
+    """``rows``: names both tables have, or ``A:B`` (row A of ``a_dir``, row B of
+    ``b_dir``)."""
     from bsp_fast.metrics.uncertainty import holm
     from bsp_fast.reproduction.evidence import rerun_difference
 
     a, b = _results(a_dir), _results(b_dir)
     out = []
     for row in rows:
-        for res, folder in ((a, a_dir), (b, b_dir)):
-            if row not in res["results"]:
-                sys.exit(f"cross_table: {folder / 'results.json'} has no row {row!r}")
-        t = rerun_difference(a, row, b, row, metric, paired_seeds=False)
+        ra, _, rb = row.partition(":")
+        rb = rb or ra
+        for res, folder, name in ((a, a_dir, ra), (b, b_dir, rb)):
+            if name not in res["results"]:
+                sys.exit(f"cross_table: {folder / 'results.json'} has no row {name!r}")
+        t = rerun_difference(a, ra, b, rb, metric, paired_seeds=False)
         out.append({"a": a.get("table"), "b": b.get("table"), "budget": a.get("budget"),
-                    "row": row, "metric": metric,
-                    "seeds": [len(a["results"][row]["seeds"]), len(b["results"][row]["seeds"])],
-                    "value_a": a["results"][row]["metrics"][metric],
-                    "value_b": b["results"][row]["metrics"][metric],
+                    "row": ra if ra == rb else f"{ra} → {rb}", "metric": metric,
+                    "seeds": [len(a["results"][ra]["seeds"]), len(b["results"][rb]["seeds"])],
+                    "value_a": a["results"][ra]["metrics"][metric],
+                    "value_b": b["results"][rb]["metrics"][metric],
                     "difference": t.value, "interval": [t.low, t.high], "p": t.p,
                     "recordings": t.n})
     for r, p in zip(out, holm([r["p"] for r in out])):
@@ -73,7 +79,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--a", type=Path, required=True, help="one table's run folder")
     p.add_argument("--b", type=Path, required=True, help="the other's")
-    p.add_argument("--rows", required=True, help="rows both tables have, comma-separated")
+    p.add_argument("--rows", required=True,
+                   help="rows both tables have, comma-separated; A:B for row A of --a "
+                        "against row B of --b")
     p.add_argument("--metric", required=True)
     p.add_argument("--out", type=Path, required=True)
     a = p.parse_args(argv)

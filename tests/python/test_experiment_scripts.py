@@ -208,3 +208,15 @@ def test_cross_table_difference_by_hand_with_holm(tmp_path):
     with pytest.raises(SystemExit, match="no row 'gru'"):
         ct.main(["--a", str(a), "--b", str(b), "--rows", "gru", "--metric", "mpjpe_mm",
                  "--out", str(out)])
+    # A:B: two rows of one table (here the b folder's row renamed), the same numbers
+    doc = json.loads((b / "results.json").read_text())
+    doc["results"]["lstm-upd"] = doc["results"].pop("lstm")
+    (b / "results.json").write_text(json.dumps(doc))
+    assert ct.main(["--a", str(a), "--b", str(b), "--rows", "lstm:lstm-upd", "--metric",
+                    "mpjpe_mm", "--out", str(out)]) == 0
+    rows = json.loads((out / "cross_table.json").read_text())["rows"]
+    assert [r["row"] for r in rows] == ["lstm", "lstm → lstm-upd"]
+    assert rows[1]["difference"] == pytest.approx(5.0) and rows[1]["interval"] == row["interval"]
+    with pytest.raises(SystemExit, match="no row 'lstm'"):
+        ct.main(["--a", str(a), "--b", str(b), "--rows", "lstm", "--metric", "mpjpe_mm",
+                 "--out", str(out)])
