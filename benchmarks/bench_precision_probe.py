@@ -8,8 +8,9 @@ probe's own time. A fresh cache each run (nothing is read from or written to the
         [--fixtures DIR] [--steps]
 
 ``--device cuda`` times the same steps on the GPU (wall time, the queue drained at each
-reading) and prints both medians, their ratio and what ``auto``'s probe picks there. ``--fixtures DIR`` keeps the fixture clip files there (made if missing),
-so that a machine without the C++ core, which makes them, can run on copies.
+reading) and prints both medians, their ratio and what ``auto``'s probe picks there.
+``--fixtures DIR`` keeps the fixture clip files there (made if missing), so that a
+machine without the C++ core, which makes them, can run on copies.
 """
 from __future__ import annotations
 

@@ -144,9 +144,10 @@ def _run(job, repeat: int = 1):
     return dict(first, total_s=time.time() - job[5], repeat=repeat, cpu_s=time.process_time())
 
 
-def clip_file(folder: str, name: str, batch: int, length: int, train_clips: int) -> str:
-    """The generated clip file of ``name`` for ``--train-clips`` in ``folder`` (made if
-    missing; benchmarks/gpu_check.sh makes them ahead for a machine without the core)."""
+def clip_file(folder: str, name: str, batch: int, length: int, train_clips: int) -> tuple:
+    """``(path, train clips)`` of ``name``'s generated clip file for ``--train-clips`` in
+    ``folder`` (made if missing; benchmarks/gpu_check.sh makes them ahead for a machine
+    without the core); models at small batches get half the clips."""
     from bsp_fast.data.testing import write_clip_file
 
     n = train_clips if batch >= 32 else train_clips // 2
@@ -154,7 +155,7 @@ def clip_file(folder: str, name: str, batch: int, length: int, train_clips: int)
     if not os.path.exists(h5):
         write_clip_file(h5, clips=(n, n // 4, n // 4), clip_length=length,
                         frames_per_recording=8 * length, seed=1, rotations=False)
-    return h5
+    return h5, n
 
 
 def main(argv=None) -> int:
@@ -196,8 +197,7 @@ def main(argv=None) -> int:
     for name, batch, length, quick_updates in MODELS:
         if name not in args.models:
             continue
-        n = args.train_clips if batch >= 32 else args.train_clips // 2
-        h5 = clip_file(tmp, name, batch, length, args.train_clips)
+        h5, n = clip_file(tmp, name, batch, length, args.train_clips)
         for mode in args.modes:
             with ctx.Pool(1) as pool:  # a fresh process: imports and start-up counted
                 steps = -(-n // batch)

@@ -161,6 +161,7 @@ def test_mid_epoch_checkpoint_resumes_exactly(clips, uninterrupted, tmp_path, mo
     assert train_main(["--resume", str(out), "--quiet"]) == 0
     assert _test_metrics(out) == uninterrupted.metrics
 
+
 @pytest.mark.parametrize("caps", [["--max-steps", "340", "--early-stop", "20"],
                                   ["--early-stop", "20"]])
 def test_kill_9_after_an_epoch_end_checkpoint_with_update_cap_and_early_stop(clips, tmp_path,
@@ -192,7 +193,6 @@ def test_kill_9_after_an_epoch_end_checkpoint_with_update_cap_and_early_stop(cli
     wb = torch.load(out / "checkpoints" / "last.ckpt", weights_only=True)
     assert wa["global_step"] == wb["global_step"]
     assert all(torch.equal(wa["state_dict"][k], wb["state_dict"][k]) for k in wa["state_dict"])
-
 
 
 def test_full_disk_message(clips, tmp_path, monkeypatch, capsys):

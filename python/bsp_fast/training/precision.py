@@ -123,9 +123,10 @@ def kept_precision(saved: dict):
     started (its config.yaml's ``resolved``), or None. Asking again could answer otherwise
     (another machine, a cleared cache, a probe near its margin) and change the precision
     in the middle of the run."""
-    resolved = (saved or {}).get("resolved") or {}
+    saved = saved or {}
+    resolved = saved.get("resolved") or {}
     pick, why = resolved.get("precision"), resolved.get("precision_reason") or ""
-    if (saved or {}).get("precision") != "auto" or pick not in ("32", "bf16-mixed"):
+    if saved.get("precision") != "auto" or pick not in ("32", "bf16-mixed"):
         return None
     prefix = "auto, kept from the run's start: "
     return pick, why if why.startswith(prefix) else prefix + why

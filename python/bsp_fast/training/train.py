@@ -18,7 +18,8 @@ from ..atomic import OutputOverlapError, atomic_output, refuse, remove
 from .runs import ENV_TMP, MARKER, RunDirectory, RunError, checkpoint_info, default_run_dir, \
     is_temporary, open_run, read_marker, read_run, refuse_unsafe_output, resume_hint, \
     write_json, write_marker
-from .precision import check_precision, kept_precision, native_bf16, resolve_precision
+from .precision import check_precision, decide_precision, kept_precision, native_bf16, \
+    probe_key, resolve_precision, run_model_key, time_steps
 from .setup import make_datamodule, make_trainer, prepare_data, rank as _rank
 from .tasks import TASKS, get_task
 
@@ -241,7 +242,6 @@ def _precision(cfg: dict, module, dm, resume=None) -> tuple:
     cached per model, CPU or GPU and thread count; .precision)."""
     import torch
 
-    from .precision import decide_precision, probe_key, run_model_key, time_steps
     if cfg["precision"] == "auto" and (resume or {}).get("precision"):
         return resume["precision"]
     ds = dm.datasets["train"]
