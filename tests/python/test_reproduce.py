@@ -176,10 +176,10 @@ def test_autoencoder_and_pose_findings():
     pose = R.load_table("pose_estimation")
     res = {"pose_cnn": {"metrics": {"pck_0.05": 0.9}, "initial": {"pck_0.05": 0.5}},
            "average_skeleton": {"metrics": {"pck_0.05": 0.5}, "initial": {"pck_0.05": 0.5}}}
-    # the last eleven (pose_temporal's, its ablations' and the width-32 row's, issue #38)
-    # need their rows: n/a
+    # the last fourteen (pose_temporal's, its ablations' and the width-32 row's, issue
+    # #38) need their rows: n/a
     assert [f["direction"] for f in R.evaluate_findings(pose, res)] == [
-        "does not hold", "holds", "holds", "holds", "n/a"] + ["n/a"] * 11
+        "does not hold", "holds", "holds", "holds", "n/a"] + ["n/a"] * 14
     res["pose_cnn"]["metrics"]["pck_0.05"] = 0.53
     res["pose_cnn"]["metrics"]["pck_0.05_noisy"] = 0.40
     res["pose_cnn_mask_joints"] = {"metrics": {"pck_0.05": 0.6}, "initial": {"pck_0.05": 0.5}}
@@ -193,7 +193,7 @@ def test_autoencoder_and_pose_findings():
     found = R.evaluate_findings(pose, res)
     assert [f["direction"] for f in found] == ["holds", "does not hold", "does not hold",
                                                "holds", "holds", "holds", "does not hold",
-                                               "holds", "holds", "holds", "holds"] + ["n/a"] * 5
+                                               "holds", "holds", "holds", "holds"] + ["n/a"] * 8
     assert found[10]["ours"] == "pose_temporal 66.0 vs pose_temporal_no_temporal 62.0"
     # the width-32 row at 0.86 (noisy 0.74): 36 p.p. above the average skeleton, >= 85 %,
     # below 75 % on noisy boxes, above pose_temporal (0.66)
@@ -215,6 +215,19 @@ def test_autoencoder_and_pose_findings():
     res["pose_temporal_no_box_jitter"]["metrics"]["pck_0.05_noisy"] = 0.85
     assert R.evaluate_findings(pose, res)[15]["direction"] == "does not hold"
     del res["pose_temporal_no_box_jitter"]
+    # the last three ablations (width 8, heatmap loss + DARK, no image augmentation), each
+    # pose_temporal (0.66) against its row: above, below, equal
+    res["pose_temporal_w8"] = {"metrics": {"pck_0.05": 0.60}, "initial": {"pck_0.05": 0.5}}
+    res["pose_temporal_heatmap_dark"] = {"metrics": {"pck_0.05": 0.70},
+                                         "initial": {"pck_0.05": 0.5}}
+    res["pose_temporal_no_image_augment"] = {"metrics": {"pck_0.05": 0.66},
+                                             "initial": {"pck_0.05": 0.5}}
+    found = R.evaluate_findings(pose, res)
+    assert [f["direction"] for f in found[16:]] == ["holds", "does not hold", "does not hold"]
+    assert found[16]["ours"] == "pose_temporal 66.0 vs pose_temporal_w8 60.0"
+    for row in ("pose_temporal_w8", "pose_temporal_heatmap_dark",
+                "pose_temporal_no_image_augment"):
+        del res[row]
     res["pose_temporal_no_temporal"]["metrics"]["pck_0.05"] = 0.70  # the per-frame one ahead
     assert R.evaluate_findings(pose, res)[10]["direction"] == "does not hold"
     res["pose_temporal"]["metrics"]["pck_0.05"] = 0.64  # 14 p.p.: not more than 15
