@@ -131,6 +131,39 @@ def test_kill_9_resumes_from_the_last_periodic_checkpoint(clips, uninterrupted, 
     assert _test_metrics(out) == uninterrupted.metrics
 
 
+def test_a_continued_killed_run_stopped_again_leaves_no_stale_copy(clips, uninterrupted,
+                                                                   tmp_path):
+    # killed (-9) at epoch 2, continued, then stopped with SIGTERM: the stopped run is
+    # published under its name and the killed run's temporary directory, now superseded,
+    # is removed (a copy left behind would be found again as a run to continue)
+    out = tmp_path / "run"
+    proc = _start(clips, out, "--checkpoint-every", "0.05s")
+    orphan = _wait_for_training(out, proc, epoch=2)
+    proc.kill()
+    proc.communicate(timeout=60)
+    killed_at = runs_mod.read_marker(orphan)["epoch"]
+    cmd = [sys.executable, "-m", "bsp_fast", "train", "--resume", str(out), "--quiet"]
+    proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    t0 = time.monotonic()
+    while True:  # the continued run's own temporary directory, past the killed epoch
+        assert proc.poll() is None and time.monotonic() - t0 < 120, proc.communicate()
+        busy = [runs_mod.read_marker(p) or {} for p in out.parent.glob(f".{out.name}.tmp-*")
+                if p != orphan]
+        if any(m.get("pid") == proc.pid and (m.get("epoch") or 0) > killed_at for m in busy):
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert (out / "incomplete.json").is_file() and not orphan.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert runs_mod.resumable(out) == out
+    res = bsp_fast.train(resume=out, quiet=True)
+    assert res.run_dir == out and not (out / "incomplete.json").exists()
+    assert _test_metrics(out) == uninterrupted.metrics
+
+
 def test_mid_epoch_checkpoint_resumes_exactly(clips, uninterrupted, tmp_path, monkeypatch):
     # a checkpoint after every batch, and the run stopped by a full disk mid-epoch
     out = tmp_path / "run"

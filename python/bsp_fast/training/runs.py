@@ -17,7 +17,7 @@ import os
 import shutil
 from pathlib import Path
 
-from ..atomic import DATASET_FILES, check_outputs, publish, temp_path, write_text
+from ..atomic import DATASET_FILES, check_outputs, publish, remove, temp_path, write_text
 
 __all__ = ["RunDirectory", "RunError", "default_run_dir", "resolve_checkpoint", "read_run",
            "ENV_TMP", "MARKER", "write_marker", "read_marker", "orphaned_runs",
@@ -107,6 +107,16 @@ class RunDirectory:
             self.left_in = self.final
         except OSError:
             self.left_in = self.tmp
+            return
+        self._drop_orphan()
+
+    def _drop_orphan(self) -> None:
+        """A killed run's temporary directory that this run continued: what is now
+        published under the final name holds all of it and more, and a copy left behind
+        would be found again by :func:`orphaned_runs`."""
+        if self.copy_from is not None and is_temporary(self.copy_from) \
+                and self.copy_from != self.tmp:
+            remove(self.copy_from)
 
     def commit(self) -> None:
         if self.committed:
@@ -116,6 +126,7 @@ class RunDirectory:
         except FileExistsError as exc:  # another run published the same --out meanwhile
             raise RunError(f"{exc}; this run is left in {self.tmp}", code=3) from None
         self.committed = True
+        self._drop_orphan()
 
 
 def is_run_directory(path) -> bool:

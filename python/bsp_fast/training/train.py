@@ -62,7 +62,7 @@ def resolve_config(cli: dict, config_path=None) -> tuple:
             known["data"] = resolved["data"]  # a relative path, resumed from elsewhere
         cfg.update(C.normalise(known, f"{target} (saved config)"))
         orphan = run_dir is not None and is_temporary(run_dir)
-        resume = {"ckpt": Path(ckpt), "run_dir": run_dir, "orphan": orphan,
+        resume = {"ckpt": Path(ckpt), "run_dir": run_dir,
                   "epoch": info.get("restored_epoch"),  # Lightning's current_epoch
                   "precision": kept_precision(saved)}  # auto's answer at its start
         if orphan:  # a killed run: it goes to the --out it was started with
@@ -230,8 +230,6 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
             raise
         finally:
             os.environ.pop(ENV_TMP, None)
-    if resume is not None and resume.get("orphan"):
-        remove(resume["run_dir"])  # continued and published under its own name
     return result
 
 
