@@ -272,8 +272,10 @@ def train_options(args, h5: Path, crop_size: int, width: int, seed: int) -> dict
     """The full model's bsp-train options (the table's ``full`` row) for one curve run."""
     opts = dict(task="pose_estimation", model=MODEL, data=str(h5), crop_size=crop_size,
                 seed=seed, batch_size=args.batch_size, early_stop=0, threads=1,
-                accelerator="cpu", precision="32" if args.smoke else "auto",
-                image_augment=True, hp={"width": width}, **JITTER)
+                accelerator="cpu", precision="32" if args.smoke else args.precision,
+                image_augment=True, hp={"width": width, **({"flip_test": True}
+                                                           if args.flip_test else {})},
+                **JITTER)
     if args.smoke:
         opts.update(limit_batches=2, image_rotation=15.0)
     return opts
@@ -487,6 +489,13 @@ def main(argv=None) -> int:
                    "is chosen and the budget is its own plateau or cap (default: updates)")
     c.add_argument("--no-train", action="store_true",
                    help="fix the budget from the runs as they are (train nothing more)")
+    c.add_argument("--precision", default="auto",
+                   help="bsp-train --precision of every run (auto); pin the precision of the "
+                   "table row the curve is for (e.g. bf16-mixed): auto's probe can choose "
+                   "otherwise on a loaded machine")
+    c.add_argument("--flip-test", action="store_true",
+                   help="validate with the test-time flip (hp flip_test), as a row that uses it "
+                   "is scored")
     c.add_argument("--smoke", action="store_true", help="plumbing only: tiny chunks, 1 seed")
     t = sub.add_parser("table", help="write the ablation table from OUT/budget.json again")
     t.add_argument("--out", default="runs/pose_budget")

@@ -104,6 +104,18 @@ def test_budget_by_hand_at_equal_cpu():
         pb.fix_budget(configs, 1000, 0.005, 2, rule="wall")
 
 
+def test_curve_options_pin_the_precision_and_the_flip():
+    import argparse
+
+    args = argparse.Namespace(batch_size=4, smoke=False, precision="auto", flip_test=False)
+    opts = pb.train_options(args, Path("x.h5"), 64, 16, 0)
+    assert (opts["precision"], opts["hp"], opts["early_stop"]) == ("auto", {"width": 16}, 0)
+    args.precision, args.flip_test = "bf16-mixed", True  # a curve for pose_temporal_w32
+    opts = pb.train_options(args, Path("x.h5"), 64, 32, 3)
+    assert (opts["precision"], opts["hp"], opts["seed"]) == (
+        "bf16-mixed", {"width": 32, "flip_test": True}, 3)
+
+
 def test_the_ablation_table_loads_with_one_budget_rule(tmp_path):
     import yaml
 
