@@ -220,3 +220,42 @@ def test_cross_table_difference_by_hand_with_holm(tmp_path):
     with pytest.raises(SystemExit, match="no row 'lstm'"):
         ct.main(["--a", str(a), "--b", str(b), "--rows", "lstm", "--metric", "mpjpe_mm",
                  "--out", str(out)])
+
+
+def test_pose_generalisation_smoke_scores_train_val_and_test(tmp_path):
+    from bsp_fast import reproduction as R
+    from bsp_fast.data.testing import write_clip_file
+    from bsp_fast.training.evaluate import evaluate
+
+    h5 = tmp_path / "media.h5"
+    write_clip_file(h5, clips=(16, 8, 8), clip_length=4, seed=4, media=True)
+    assert R.main(["pose_estimation", "--data", str(h5), "--budget", "smoke", "--out",
+                   str(tmp_path / "runs"), "--rows", "pose_temporal", "--seeds", "2",
+                   "--set", "crop_size=32", "--set", "hp={width: 4}",
+                   "--set", "box_jitter_scale=0", "--set", "box_jitter_shift=0"]) == 0
+    pg = _load("pose_generalisation")
+    table = tmp_path / "runs" / "pose_estimation-smoke"
+    assert pg.main([str(table), "--out", str(tmp_path / "out")]) == 0
+    doc = json.loads((tmp_path / "out" / "pose_generalisation.json").read_text())
+    part = doc["rows"]["pose_temporal"]
+    assert part["seeds"] == ["22742", "22743"]
+    for seed in part["seeds"]:
+        run = table / "pose_temporal" / f"seed-{seed}"
+        got = part["per_seed"][seed]
+        # the linked file scores the split's own clips: the same as bsp-eval --split val,
+        # every train clip, and the test entry is the run's own metrics.json
+        assert got["val"]["metrics"] == evaluate(run, "val").metrics
+        assert got["train"]["clips"] == 16 and got["val"]["clips"] == 8
+        assert got["test"]["metrics"] == json.loads((run / "metrics.json").read_text())["test"]
+        assert got["train"]["metrics"] != got["val"]["metrics"]
+    one = part["summary"][0]
+    assert one["metric"] == "pck_0.05" and one["train_recordings"] >= 1
+    want = [part["per_seed"][s][sp]["metrics"]["pck_0.05"] for s in part["seeds"]
+            for sp in ("train", "val")]
+    # a seed's pooled per-recording ratio is its metric; the gap is the means' difference
+    assert one["train_per_seed"] == pytest.approx(want[0::2])
+    assert one["gap"]["value"] == pytest.approx((sum(want[0::2]) - sum(want[1::2])) / 2)
+    assert "| pck_0.05 |" in (tmp_path / "out" / "pose_generalisation.md").read_text()
+    # --resume scores nothing again
+    pg.score = lambda run, linked: pytest.fail("scored again")
+    assert pg.main([str(table), "--out", str(tmp_path / "out"), "--resume"]) == 0
