@@ -6,8 +6,8 @@ Each seed's best checkpoint of a pose_estimation table row is scored, with the t
 protocol (mask-box crops, no augmentation, no jitter, every joint), on the clips it was
 trained on (the ``train`` split), on the validation clips and on the test clips. The
 train and val scores come from files whose ``test`` split links to the run's ``train`` or
-``val`` split (HDF5 external links, nothing copied); the test scores are the run's own
-``test_per_recording.json``. Per metric: each split's mean over seeds, and the gap train -
+``val`` split (HDF5 external links in a temporary folder, nothing copied); the test
+scores are the run's own ``test_per_recording.json``. Per metric: each split's mean over seeds, and the gap train -
 val with a two-level interval (seeds drawn once for both, as they are the same runs; each
 split's recordings drawn on their own, as the splits share none; t method, as the tables).
 
@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -165,11 +166,12 @@ def main(argv=None) -> int:
         have = done.setdefault(row, {})
         for run in runs:
             seed = run.name.split("-", 1)[1]
-            if seed not in have:
+            if seed not in have:  # the link files live only while the seed is scored
                 h5 = _run_h5(run)
-                linked = {sp: split_as_test(h5, sp, a.out / "data" / f"{h5.stem}-{sp}-as-test.h5")
-                          for sp in ("train", "val")}
-                have[seed] = score(run, linked)
+                with tempfile.TemporaryDirectory(prefix="pose_generalisation-") as tmp:
+                    linked = {sp: split_as_test(h5, sp, Path(tmp) / f"{sp}-as-test.h5")
+                              for sp in ("train", "val")}
+                    have[seed] = score(run, linked)
             doc = {"runs": portable(a.runs),
                    "rows": {r: {"seeds": sorted(s), "per_seed": s,
                                 "summary": summarise(s) if len(s) > 1 else []}
