@@ -115,6 +115,39 @@ def test_signal_saves_and_resume_ends_like_an_uninterrupted_run(clips, uninterru
     assert all(torch.equal(a[k], b[k]) for k in b)
 
 
+@pytest.mark.parametrize("carry", [[1000.0, 900.0], None])
+def test_fit_seconds_add_up_over_the_processes_of_a_resumed_run(clips, uninterrupted,
+                                                                tmp_path, carry):
+    # the seconds a run records are its whole fit's, not its last process's: every
+    # checkpoint carries the fit seconds so far, and a resumed run adds its own to them
+    out = tmp_path / "run"
+    proc = _start(clips, out)
+    _wait_for_training(out, proc)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    last = out / "checkpoints" / "last.ckpt"
+    ckpt = torch.load(last, weights_only=True)
+    wall, cpu = ckpt["callbacks"]["BSPLifecycle"]["fit_seconds"]
+    assert 0 < cpu and 0 < wall
+    # a known carry, so that the sum can be checked: as if earlier processes had trained
+    # for 1,000 s (wall) and 900 s (CPU); None: a checkpoint written before the carry
+    if carry is None:
+        del ckpt["callbacks"]["BSPLifecycle"]["fit_seconds"]
+    else:
+        ckpt["callbacks"]["BSPLifecycle"]["fit_seconds"] = carry
+    torch.save(ckpt, last)
+    t0, c0 = time.perf_counter(), time.process_time()
+    bsp_fast.train(resume=out, quiet=True)
+    took, took_cpu = time.perf_counter() - t0, time.process_time() - c0
+    sec = json.loads((out / "metrics.json").read_text())["seconds"]
+    wall, cpu = carry or (0.0, 0.0)
+    assert wall < sec["fit"] < wall + took and cpu < sec["fit_cpu"] < cpu + took_cpu
+    # the record says whether it covers every process: carried, or partial (a lower bound)
+    assert (sec.get("carried"), sec.get("partial")) == ((True, None) if carry else (None, True))
+    assert _test_metrics(out) == uninterrupted.metrics
+
+
 def test_kill_9_resumes_from_the_last_periodic_checkpoint(clips, uninterrupted, tmp_path):
     out = tmp_path / "run"
     proc = _start(clips, out, "--checkpoint-every", "0.05s")
@@ -366,3 +399,20 @@ def test_reproduce_continues_an_interrupted_row(tmp_path, monkeypatch):
     monkeypatch.setattr("bsp_fast.training.train.train", lambda **kw: calls.append(kw))
     seeds._run([("row seed 1", tmp_path / "c.yaml", run)], 1, True, lambda *_: None)
     assert calls == [{"resume": str(run), "quiet": True}]
+
+
+def test_fit_time_of_runs_resumed_before_it_was_carried_is_a_lower_bound(tmp_path):
+    from bsp_fast.reproduction.cost_columns import cost_cells
+    from bsp_fast.reproduction.runner import _seconds
+
+    run = tmp_path / "run"
+    (run / "logs" / "version_0").mkdir(parents=True)
+    old = {"fit": 600.0, "fit_cpu": 540.0}  # a record of a run's last process only
+    assert _seconds(run, old) == old  # one process: its whole fit
+    (run / "logs" / "version_1").mkdir()  # resumed once
+    assert _seconds(run, old) == dict(old, partial=True)
+    new = dict(old, carried=True)  # fit seconds summed over its processes
+    assert _seconds(run, new) == new
+    cost = {"parameters": 10, "flops_per_clip": 2e6}
+    assert cost_cells([run], [new, new], cost)[2] == "10.0; 9.0"
+    assert cost_cells([run], [new, dict(old, partial=True)], cost)[2] == "≥ 10.0; 9.0"

@@ -1,7 +1,8 @@
 """The cost columns of the reproduced tables: parameters and forward FLOPs per clip of a
 row's model (``bsp_fast.models.cost``, counted on a few test clips of the run's own HDF5
 file) and its training time (``metrics.json``: wall seconds of ``fit``, and process CPU
-seconds where the run recorded them)."""
+seconds where the run recorded them; "≥" where a run's record covers only the last
+process of a resumed run)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -56,4 +57,8 @@ def cost_cells(run_dirs: list, seconds: list, cost: dict | None = None) -> list:
     t = f"{sum(fits) / len(fits) / 60:.1f}"
     if len(cpus) == len(fits):
         t += f"; {sum(cpus) / len(cpus) / 60:.1f}"
+    # a run resumed before fit seconds were carried over resumes recorded its last
+    # process's only: the row's mean is a lower bound
+    if any(s and s.get("partial") for s in seconds):
+        t = "≥ " + t
     return [params, flops, t]

@@ -186,9 +186,13 @@ def _sentences(doc: dict) -> list:
                    f"{sum(at_end.values())} of {len(runs)} runs" + (f" ({rows})" if rows else "")
                    + ".")
         cpu = [s["seconds"].get("fit_cpu") for _, s in runs if s.get("seconds")]
+        partial = sum(bool(s.get("seconds", {}).get("partial")) for _, s in runs)
         if cpu and all(c is not None for c in cpu):
-            out.append(f"Training took {sum(cpu) / 60:.1f} CPU minutes over {len(runs)} "
-                       f"run{'s' * (len(runs) != 1)} (fit only, `metrics.json`).")
+            out.append(f"Training took {'at least ' * bool(partial)}{sum(cpu) / 60:.1f} CPU "
+                       f"minutes over {len(runs)} run{'s' * (len(runs) != 1)} (fit only, "
+                       "`metrics.json`" + (f"; {partial} of them resumed before fit time was "
+                                           "carried over resumes, counted for their last "
+                                           "process only" if partial else "") + ").")
     return out
 
 

@@ -243,12 +243,23 @@ def _run_names(tab, wanted, seeds, base: Path, budget: str) -> dict:
     return {name: base / name for _, _, name in _runs(tab, wanted, seeds, budget)}
 
 
+def _seconds(run_dir: Path, seconds: dict) -> dict:
+    """The run's recorded seconds, marked ``partial`` where its fit time covers only its
+    last process: resumed (several CSV log versions) before fit seconds were carried over
+    resumes (no ``carried`` key)."""
+    resumed = len(list((run_dir / "logs").glob("version_*"))) > 1
+    if seconds and resumed and not seconds.get("carried"):
+        return dict(seconds, partial=True)
+    return seconds
+
+
 def _seed_result(run_dir: Path) -> dict:
     run = read_run(run_dir)
     m = run["metrics"]
     return {"metrics": m.get("test", {}), "initial": (m.get("initial") or {}).get("test", {}),
             "baseline": (m.get("initial") or {}).get("baseline"), "epochs": m.get("epochs"),
-            "best_epoch": m.get("best_epoch"), "seconds": m.get("seconds", {}),
+            "best_epoch": m.get("best_epoch"),
+            "seconds": _seconds(run_dir, m.get("seconds", {})),
             "precision": m.get("precision"), "run": str(run_dir),
             "per_recording": str(run_dir / BREAKDOWN) if (run_dir / BREAKDOWN).is_file()
             else None, "noise": run["config"].get("noise"), "mjp": run["config"].get("mjp")}

@@ -157,6 +157,9 @@ class Lifecycle(Callback):
         self._resume_rng = None
         self._skip = None
         self.trained = False
+        #: (wall, CPU) seconds of fit of the processes before this one, up to the save of
+        #: the checkpoint it continues from; ``_clock``: this process's fit start
+        self.carried, self._clock, self.partial = (0.0, 0.0), None, False
 
     @property
     def state_key(self) -> str:
@@ -169,17 +172,35 @@ class Lifecycle(Callback):
     # position and random state travel in every checkpoint Lightning writes
     def state_dict(self) -> dict:
         return {"epoch": self.epoch, "batches_done": self.batches_done, "step": self.step,
-                "rng": _rng_state()}
+                "rng": _rng_state(), "fit_seconds": list(self.fit_seconds())}
 
     def load_state_dict(self, state: dict) -> None:
         self.epoch, self.step = int(state["epoch"]), int(state["step"])
         self.batches_done = int(state["batches_done"])
+        # checkpoints written before fit_seconds was saved carry none: their earlier
+        # processes' seconds are unknown, and the run's record says so (``partial``)
+        self.carried = tuple(float(x) for x in state.get("fit_seconds", (0.0, 0.0)))
+        self.partial = "fit_seconds" not in state
         self._skip = (self.epoch, self.batches_done)
         # now, before the train loader's first iterator draws its seed from the global
         # generator (as it did after the save in the uninterrupted run); again at the first
         # batch of a run resumed mid-epoch (see on_train_start)
         _set_rng_state(state["rng"])
         self._resume_rng = state["rng"]
+
+    def start_clock(self) -> tuple:
+        """Starts this process's fit clocks; returns ``(perf_counter, process_time)``."""
+        self._clock = (time.perf_counter(), time.process_time())
+        return self._clock
+
+    def fit_seconds(self) -> tuple:
+        """``(wall, CPU)`` seconds of fit over every process of a resumed run: what the
+        continued checkpoint carried plus this process's since :meth:`start_clock`. Work a
+        killed process did after its last checkpoint is redone and counted once."""
+        if self._clock is None:
+            return self.carried
+        return (self.carried[0] + time.perf_counter() - self._clock[0],
+                self.carried[1] + time.process_time() - self._clock[1])
 
     def on_save_checkpoint(self, trainer, pl_module, checkpoint) -> None:
         # the running train-loss mean of the epoch (torchmetrics states are not saved)

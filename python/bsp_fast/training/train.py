@@ -198,12 +198,13 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
         pl.seed_everything(cfg["seed"], workers=True, verbose=False)
         os.environ[ENV_TMP] = str(tmp)
         try:
-            t0, cpu0 = time.perf_counter(), time.process_time()
+            life.start_clock()
             trainer.fit(module, datamodule=dm, ckpt_path=ckpt_path, weights_only=True)
             if sig.received is not None:  # during the last validation: stop before testing
                 raise Interrupted(sig.received)
-            seconds["fit"] = time.perf_counter() - t0
-            seconds["fit_cpu"] = time.process_time() - cpu0  # this process's threads
+            # wall and CPU (this process's threads), over every process of a resumed run
+            seconds["fit"], seconds["fit_cpu"] = life.fit_seconds()
+            seconds.update({"partial": True} if life.partial else {"carried": True})
             write_marker(tmp, **life_marker, state="running", fit_done=trainer.current_epoch,
                          epoch=trainer.current_epoch, step=trainer.global_step)
             cfg = epochs_note(cfg, trainer, trained=life.trained or bool(done))
