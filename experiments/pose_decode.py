@@ -73,7 +73,6 @@ def summarise(seeds: dict) -> list:
     import numpy as np
 
     from bsp_fast.metrics import hierarchical as H
-    from bsp_fast.metrics import uncertainty as U
 
     out = []
     for m in METRICS:
@@ -82,13 +81,7 @@ def summarise(seeds: dict) -> list:
             per = [seeds[s].get(decode, {}).get("per_recording") for s in sorted(seeds)]
             if any(p is None or m not in p["metrics"] for p in per):
                 continue
-            pooled = [U.pool([p], m) for p in per]
-            recs = sorted({r for rs, _, _ in pooled for r in rs})
-            num, den = np.zeros((len(per), len(recs))), np.zeros((len(per), len(recs)))
-            for i, (rs, n, d) in enumerate(pooled):
-                idx = [recs.index(r) for r in rs]
-                num[i, idx], den[i, idx] = n, d
-            rows[decode] = H.Ratios(num, den)
+            rows[decode] = H.Ratios.from_sections(per, m)
         if "soft_argmax" not in rows or len(rows) < 2:
             continue
         entry = {"metric": m, "seeds": len(seeds)}

@@ -77,21 +77,6 @@ def score(run: Path, linked: dict) -> dict:
     return out
 
 
-def _ratios(per_seed: list, metric: str):
-    import numpy as np
-
-    from bsp_fast.metrics import hierarchical as H
-    from bsp_fast.metrics import uncertainty as U
-
-    pooled = [U.pool([p], metric) for p in per_seed]
-    recs = sorted({r for rs, _, _ in pooled for r in rs})
-    num, den = np.zeros((len(pooled), len(recs))), np.zeros((len(pooled), len(recs)))
-    for i, (rs, n, d) in enumerate(pooled):
-        idx = [recs.index(r) for r in rs]
-        num[i, idx], den[i, idx] = n, d
-    return H.Ratios(num, den)
-
-
 def summarise(seeds: dict) -> list:
     """Per metric and row: each split's mean over seeds, per-seed values, and the gap
     train - val (two-level interval: the same seeds, independent recordings)."""
@@ -105,7 +90,7 @@ def summarise(seeds: dict) -> list:
         if not all(m in seeds[s][sp]["per_recording"]["metrics"] for s in names
                    for sp in SPLITS):
             continue
-        rows = {sp: _ratios([seeds[s][sp]["per_recording"] for s in names], m)
+        rows = {sp: H.Ratios.from_sections([seeds[s][sp]["per_recording"] for s in names], m)
                 for sp in SPLITS}
         entry = {"metric": m, "seeds": names}
         for sp, r in rows.items():

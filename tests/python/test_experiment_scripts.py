@@ -138,7 +138,9 @@ def test_precision_retrain_difference_by_hand_and_verdicts(tmp_path):
         pr.main([*args, "--fp32", str(same), "--margin", "1", "--change", "layout"])
 
 
-def test_pose_decode_smoke_rescores_the_same_checkpoints(tmp_path):
+def _pose_smoke_table(tmp_path) -> Path:
+    """Two smoke seeds of the pose table's pose_temporal row (tiny network and crops) on a
+    clip file of 16/8/8 clips; the table's run folder."""
     from bsp_fast import reproduction as R
     from bsp_fast.data.testing import write_clip_file
 
@@ -149,6 +151,11 @@ def test_pose_decode_smoke_rescores_the_same_checkpoints(tmp_path):
                    "--set", "crop_size=32", "--set", "hp={width: 4}",
                    # no context frames in this file: no box jitter (nor noisy-box scores)
                    "--set", "box_jitter_scale=0", "--set", "box_jitter_shift=0"]) == 0
+    return tmp_path / "runs" / "pose_estimation-smoke"
+
+
+def test_pose_decode_smoke_rescores_the_same_checkpoints(tmp_path):
+    _pose_smoke_table(tmp_path)
     pd = _load("pose_decode")
     assert pd.main([str(tmp_path / "runs" / "pose_estimation-smoke"), "--out",
                     str(tmp_path / "out")]) == 0
@@ -223,18 +230,10 @@ def test_cross_table_difference_by_hand_with_holm(tmp_path):
 
 
 def test_pose_generalisation_smoke_scores_train_val_and_test(tmp_path):
-    from bsp_fast import reproduction as R
-    from bsp_fast.data.testing import write_clip_file
     from bsp_fast.training.evaluate import evaluate
 
-    h5 = tmp_path / "media.h5"
-    write_clip_file(h5, clips=(16, 8, 8), clip_length=4, seed=4, media=True)
-    assert R.main(["pose_estimation", "--data", str(h5), "--budget", "smoke", "--out",
-                   str(tmp_path / "runs"), "--rows", "pose_temporal", "--seeds", "2",
-                   "--set", "crop_size=32", "--set", "hp={width: 4}",
-                   "--set", "box_jitter_scale=0", "--set", "box_jitter_shift=0"]) == 0
+    table = _pose_smoke_table(tmp_path)
     pg = _load("pose_generalisation")
-    table = tmp_path / "runs" / "pose_estimation-smoke"
     assert pg.main([str(table), "--out", str(tmp_path / "out")]) == 0
     doc = json.loads((tmp_path / "out" / "pose_generalisation.json").read_text())
     part = doc["rows"]["pose_temporal"]

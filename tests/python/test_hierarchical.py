@@ -26,6 +26,21 @@ def test_row_values_are_ratios_of_sums():
     np.testing.assert_allclose(row_values(num, den), [1.0, 1.0])
 
 
+def test_ratios_from_per_seed_sections_align_the_recordings():
+    from bsp_fast.metrics.hierarchical import Ratios
+
+    # seed 0 scored recordings b and a, seed 1 a and c: columns a, b, c; 0 / 0 where a
+    # seed has no clip of a recording
+    s0 = {"recordings": ["b", "a"], "metrics": {"pck": {"num": [3, 1], "den": [4, 2]}}}
+    s1 = {"recordings": ["a", "c"], "metrics": {"pck": {"num": [2, 5], "den": [2, 5]}}}
+    r = Ratios.from_sections([s0, s1], "pck")
+    np.testing.assert_array_equal(r.num, [[1, 3, 0], [2, 0, 5]])
+    np.testing.assert_array_equal(r.den, [[2, 4, 0], [2, 0, 5]])
+    np.testing.assert_allclose(row_values(r.num, r.den), [4 / 6, 7 / 7])
+    with pytest.raises(ValueError, match="not in the per-recording sums"):
+        Ratios.from_sections([s0], "f1")
+
+
 def test_identical_rows_are_inconclusive():
     rng = np.random.default_rng(0)
     a = _row(0.5 + rng.normal(0, 0.05, (5, 20)))

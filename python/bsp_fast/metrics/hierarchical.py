@@ -50,6 +50,21 @@ class Ratios:
                              f"got {self.num.shape} and {self.den.shape}")
         self.shape, self.empty = self.num.shape, float(empty)
 
+    @classmethod
+    def from_sections(cls, sections, metric: str) -> "Ratios":
+        """A row from its seeds' per-recording sums of ``metric`` (one section of
+        ``test_per_recording.json`` per seed, :func:`.uncertainty.pool`'s input), on the
+        union of their recordings in sorted order: 0 / 0 where a seed has no clip of one."""
+        from .uncertainty import pool
+
+        pooled = [pool([sec], metric) for sec in sections]
+        recs = sorted({r for rs, _, _ in pooled for r in rs})
+        num, den = np.zeros((len(pooled), len(recs))), np.zeros((len(pooled), len(recs)))
+        for i, (rs, n, d) in enumerate(pooled):
+            idx = [recs.index(r) for r in rs]
+            num[i, idx], den[i, idx] = n, d
+        return cls(num, den)
+
     def values(self, counts: np.ndarray) -> np.ndarray:
         """(B, S) values for (B, R) recording counts."""
         n, d = counts @ self.num.T, counts @ self.den.T
