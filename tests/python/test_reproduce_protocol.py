@@ -148,7 +148,7 @@ def test_deviations_and_exploratory_fields_load(tmp_path):
 RECORDED = {"autoencoder": ["38006fb", "0904e51"], "classification": ["0904e51", "f2d3e8e"],
             "lifting": ["0904e51", "f2d3e8e", "2363a0b"],
             "pose_estimation": ["0904e51", "f053164", "047d609", "b175e10", "8ed698f",
-                                 "c341cd6", "346e0a0", "0217f14"]}
+                                 "c341cd6", "346e0a0", "0217f14", "7ea171e"]}
 
 
 @pytest.mark.parametrize("table", R.TABLES)
