@@ -188,10 +188,9 @@ class Lifecycle(Callback):
         _set_rng_state(state["rng"])
         self._resume_rng = state["rng"]
 
-    def start_clock(self) -> tuple:
-        """Starts this process's fit clocks; returns ``(perf_counter, process_time)``."""
+    def start_clock(self) -> None:
+        """Starts this process's fit clocks (wall and CPU)."""
         self._clock = (time.perf_counter(), time.process_time())
-        return self._clock
 
     def fit_seconds(self) -> tuple:
         """``(wall, CPU)`` seconds of fit over every process of a resumed run: what the
