@@ -21,6 +21,11 @@ tables' equivalence test against ``--margin`` (absolute, or ``N%`` of the auto r
 value): *agrees* when the whole interval lies within +-margin, *differs* when wholly
 outside, *undetermined* otherwise; a margin is to be stated before the float32 runs.
 
+``--auto`` may also be the table's published file (``docs/results/TABLE-BUDGET.json`` and
+its per-recording sums), for a table whose runs were made on another machine; a re-run of
+fewer seeds is compared with the table's first seeds (the same seed numbers), the table's
+mean and std recomputed over them.
+
 ``--change`` names another change than float32 for a re-run that keeps the table's
 precision (e.g. ``--change "NCHW layout (ebfbec9)"``: the same row and seeds re-trained
 after a code change that should alter rounding only); its re-run must have trained in
@@ -30,6 +35,13 @@ The margins, stated before the first float32 run (2026-11-26): MPJPE 2 % and PCK
 percentage points (the bf16 tolerances on the same weights, docs/training.md), F1 0.02.
 Rows: classification lstm-perfect (f1, 0.02), lifting lstm (mpjpe_mm, 2%), autoencoder
 clean (pck_0.05, 0.005), pose_estimation pose_cnn (pck_0.05, 0.005), 5 seeds each.
+
+Stated 2026-11-27, while the runs trained and before any of their test numbers was
+seen: the lifting table's four rows, re-trained in float32 on an AVX2-only CPU (the 3-seed
+timing run of docs/performance.md, where ``auto`` picks float32), against the published
+bf16 table's first 3 seeds (``--auto docs/results/lifting-quick.json``), each with
+``--change "float32 (AVX2-only CPU)"`` and the margin MPJPE 2 %. Precision and CPU change
+together there, so a difference is the pair's, not float32's alone.
 """
 from __future__ import annotations
 
@@ -42,6 +54,13 @@ FILE = "precision_retrain"
 
 
 def _results(folder: Path) -> dict:
+    if folder.suffix == ".json":  # a published table (its run folder on another machine)
+        from bsp_fast.reproduction.readme import load_published
+
+        try:
+            return load_published(folder)
+        except ValueError as e:
+            sys.exit(f"precision_retrain: {e}")
     path = folder / "results.json"
     try:
         return json.loads(path.read_text(encoding="utf-8"))
@@ -73,14 +92,17 @@ def compare(auto_dir: Path, fp32_dir: Path, row: str, metric: str, margin: str,
         if row not in res["results"]:
             sys.exit(f"precision_retrain: {folder / 'results.json'} has no row {row!r}")
     ra, rb = a["results"][row], b["results"][row]
-    if change == "float32" and _precisions(rb) != ["32"]:
+    if list(rb["seeds"]) != list(ra["seeds"]):
+        ra = _first_seeds(ra, list(rb["seeds"]), metric, auto_dir)
+    fp32 = change.startswith("float32")  # e.g. "float32 (AVX2-only CPU)": another machine
+    if fp32 and _precisions(rb) != ["32"]:
         sys.exit(f"precision_retrain: {fp32_dir}: row {row!r} ran in {_precisions(rb)}, "
                  "not float32 (--set precision=32)")
-    if change != "float32" and _precisions(rb) != _precisions(ra):
+    if not fp32 and _precisions(rb) != _precisions(ra):
         sys.exit(f"precision_retrain: {fp32_dir}: row {row!r} ran in {_precisions(rb)}, the "
                  f"table's runs in {_precisions(ra)}: a re-run for {change!r} must keep the "
                  "precision")
-    test = rerun_difference(a, row, b, row, metric)
+    test = rerun_difference({"results": {row: ra}}, row, b, row, metric)
     m = _margin(margin, ra["metrics"][metric])
     return {"table": a.get("table"), "budget": a.get("budget"), "row": row,
             "metric": metric, "seeds": [int(s) for s in ra["seeds"]],
@@ -92,6 +114,20 @@ def compare(auto_dir: Path, fp32_dir: Path, row: str, metric: str, margin: str,
             "verdict": equivalence(test, 0.0, m), "change": change,
             "fit_cpu_min": {k: _cpu(r) for k, r in (("auto", ra), ("fp32", rb))},
             "auto_runs": portable(auto_dir), "fp32_runs": portable(fp32_dir)}
+
+
+def _first_seeds(r: dict, seeds: list, metric: str, folder: Path) -> dict:
+    """The table's row cut to the re-run's seeds, a leading part of the table's (a re-run
+    of 3 seeds against a 5-seed table); its mean and std recomputed over those seeds."""
+    import numpy as np
+
+    if list(r["seeds"])[:len(seeds)] != seeds:
+        sys.exit(f"precision_retrain: the re-run's seeds {seeds} are not the first seeds of "
+                 f"{folder}'s row ({list(r['seeds'])})")
+    kept = {k: r["seeds"][k] for k in seeds}
+    vals = [s["metrics"][metric] for s in kept.values()]
+    return dict(r, seeds=kept, metrics={metric: float(np.mean(vals))},
+                std={metric: float(np.std(vals, ddof=1)) if len(vals) > 1 else None})
 
 
 def _cpu(r: dict) -> float | None:
@@ -124,7 +160,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--auto", type=Path, required=True, help="the table's run folder "
-                   "(RUNS/TABLE-BUDGET, --precision auto)")
+                   "(RUNS/TABLE-BUDGET, --precision auto), or its published file "
+                   "(docs/results/TABLE-BUDGET.json) where the runs were made on another "
+                   "machine")
     p.add_argument("--fp32", type=Path, required=True, help="the same row's float32 runs "
                    "(RUNS32/TABLE-BUDGET)")
     p.add_argument("--row", required=True)
@@ -133,7 +171,9 @@ def main(argv=None) -> int:
                    "the auto row's value")
     p.add_argument("--out", type=Path, required=True, help="folder of precision_retrain.json/.md")
     p.add_argument("--change", default="float32", help="what the re-run changed (default "
-                   "float32; anything else: the table's precision, other code)")
+                   "float32; a label starting with 'float32' needs float32 runs too, e.g. "
+                   "'float32 (AVX2-only CPU)'; anything else: the table's precision, other "
+                   "code)")
     a = p.parse_args(argv)
     from bsp_fast.atomic import write_text
     from bsp_fast.reproduction.readme import portable_command

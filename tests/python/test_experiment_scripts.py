@@ -136,6 +136,59 @@ def test_precision_retrain_difference_by_hand_and_verdicts(tmp_path):
     assert "| layout |" in (out / "precision_retrain.md").read_text()
     with pytest.raises(SystemExit, match="must keep the precision"):
         pr.main([*args, "--fp32", str(same), "--margin", "1", "--change", "layout"])
+    # float32 on another machine: a row of its own, float32 runs required
+    assert pr.main([*args, "--fp32", str(same), "--margin", "2%", "--change",
+                    "float32 (AVX2-only CPU)"]) == 0
+    rows = json.loads((out / "precision_retrain.json").read_text())["rows"]
+    assert [r["change"] for r in rows] == ["float32", "layout", "float32 (AVX2-only CPU)"]
+    with pytest.raises(SystemExit, match="not float32"):
+        pr.main([*args, "--fp32", str(relaid), "--margin", "1", "--change", "float32 (x)"])
+
+
+def _fake_published(folder: Path, precision: str, per_seed: dict) -> Path:
+    """:func:`_fake_results`' row as a published table: ``lifting-quick.json`` and its
+    ``.per_recording.json`` (what ``bsp-reproduce --publish`` writes), no run folder."""
+    from bsp_fast.reproduction.readme import FORMAT
+
+    res = json.loads((_fake_results(folder / "runs", precision, per_seed)
+                      / "results.json").read_text())
+    sums = {"lstm": {}}
+    for seed, s in res["results"]["lstm"]["seeds"].items():
+        sums["lstm"][seed] = json.loads(Path(s.pop("per_recording")).read_text())
+        s["metrics"] = {"mpjpe_mm": sum(per_seed[int(seed)]) / 4.0}
+    (folder / "lifting-quick.per_recording.json").write_text(json.dumps(sums))
+    doc = dict(res, format=FORMAT, per_recording="lifting-quick.per_recording.json")
+    (folder / "lifting-quick.json").write_text(json.dumps(doc))
+    return folder / "lifting-quick.json"
+
+
+def test_precision_retrain_against_a_published_table_on_its_first_seeds(tmp_path):
+    pr = _load("precision_retrain")
+    published = _fake_published(tmp_path / "results", "bf16-mixed",
+                                {1: [10.0, 40.0, 30.0], 2: [12.0, 36.0, 33.0],
+                                 3: [50.0, 90.0, 70.0]})
+    # a re-run of the table's first two seeds, each +4 on its second recording (den 2)
+    rerun = _fake_results(tmp_path / "fp32", "32", {1: [10.0, 44.0, 30.0],
+                                                   2: [12.0, 40.0, 33.0]})
+    out = tmp_path / "out"
+    args = ["--row", "lstm", "--metric", "mpjpe_mm", "--margin", "2", "--out", str(out)]
+    assert pr.main(["--auto", str(published), "--fp32", str(rerun), *args]) == 0
+    row = json.loads((out / "precision_retrain.json").read_text())["rows"][0]
+    # the table's mean over seeds 1 and 2 only: (80 / 4 + 81 / 4) / 2 = 20.125 (seed 3's
+    # 65 would make it 35.08); its std: |20 - 20.25| / sqrt(2)
+    assert row["seeds"] == [1, 2] and row["auto"] == pytest.approx(20.125)
+    assert row["auto_std"] == pytest.approx(0.25 / 2 ** 0.5)
+    assert row["difference"] == pytest.approx(1.0) and row["auto_precision"] == ["bf16-mixed"]
+    assert row["fit_cpu_min"] == {"auto": 1.0, "fp32": 1.0}
+    # a re-run whose seeds are not the table's first: refused, not silently re-paired
+    other = _fake_results(tmp_path / "other", "32", {2: [12.0, 36.0, 33.0]})
+    with pytest.raises(SystemExit, match="not the first seeds"):
+        pr.main(["--auto", str(published), "--fp32", str(other), *args])
+    # a file that is not a published table: named in the error
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    with pytest.raises(SystemExit, match="not a published table"):
+        pr.main(["--auto", str(bad), "--fp32", str(rerun), *args])
 
 
 def _pose_smoke_table(tmp_path) -> Path:

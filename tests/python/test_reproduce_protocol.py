@@ -355,6 +355,82 @@ def test_published_table_renders_into_its_readme_section(finished, monkeypatch):
     assert "**The table file has changed since these results**" in again
 
 
+@pytest.fixture(scope="module")
+def two_seeds(finished):
+    """The tiny table with two seeds, published (the runs of "another machine")."""
+    root = finished["root"] / "two-seeds"
+    code, _, err = _main(finished["argv"][:-2] + ["--out", root / "runs", "--seeds", "2",
+                                                  "--publish", root / "results"])
+    assert code == 0, err
+    return root
+
+
+def test_published_table_reads_back_and_its_findings_recompute(finished, two_seeds):
+    """``load_published``: a table whose run folder is gone (another machine's) read back
+    from its published files; the findings recomputed from them equal the published ones."""
+    from bsp_fast.reproduction.evidence import evaluate_findings
+    from bsp_fast.reproduction.table_files import load_table
+
+    path = two_seeds / "results" / "tiny_ae-smoke.json"
+    doc = RM.load_published(path)
+    for seed in ("22742", "22743"):
+        run = json.loads((two_seeds / "runs" / "tiny_ae-smoke" / "clean" / f"seed-{seed}" /
+                          "test_per_recording.json").read_text())
+        got = doc["results"]["clean"]["seeds"][seed]["per_recording"]["test"]
+        assert got["recordings"] == run["test"]["recordings"]
+        assert got["metrics"]["pck_0.05"] == run["test"]["metrics"]["pck_0.05"]
+    again = evaluate_findings(load_table(finished["table"]), doc)
+    published = json.loads(path.read_text())["findings"]
+    keys = ("text", "status", "difference", "interval", "p")
+    assert [[f.get(k) for k in keys] for f in again] == \
+        [[f.get(k) for k in keys] for f in published]
+    assert {f["status"] for f in published} - {"rows not run"}  # findings were computed
+    for bad, why in (("{}", "not a published table"), ("[1", "cannot read")):
+        (finished["root"] / "bad.json").write_text(bad)
+        with pytest.raises(ValueError, match=why):
+            RM.load_published(finished["root"] / "bad.json")
+
+
+def test_with_published_trains_only_the_missing_seeds(finished, two_seeds):
+    """Another machine: ``--seeds 3 --with-published`` trains the third seed only, takes
+    the two published ones with their own protocol records, and publishes all three with
+    the published numbers unchanged."""
+    other = finished["root"] / "other-machine"
+    published = json.loads((two_seeds / "results" / "tiny_ae-smoke.json").read_text())
+    argv = finished["argv"][:-2] + ["--out", other / "runs", "--seeds", "3"]
+    code, text, err = _main(argv + ["--with-published", two_seeds / "results",
+                                    "--publish", other / "results"])
+    assert code == 0, err
+    assert text.count("read from the published tiny_ae-smoke.json") == 2
+    base = other / "runs" / "tiny_ae-smoke" / "clean"
+    assert sorted(p.name for p in base.iterdir()) == ["seed-22744"]  # the one trained here
+    res = json.loads((other / "runs" / "tiny_ae-smoke" / "results.json").read_text())
+    assert res["protocol"]["restored"] == ["clean/seed-22742", "clean/seed-22743"]
+    for seed in ("22742", "22743"):
+        old = published["results"]["clean"]["seeds"][seed]
+        new = res["results"]["clean"]["seeds"][seed]
+        assert new["metrics"] == old["metrics"] and new["run"] is None
+        record = res["protocol"]["runs"][f"clean/seed-{seed}"]
+        assert record["code"] == published["protocol"]["runs"][f"clean/seed-{seed}"]["code"]
+        assert record["restored_from"].startswith("tiny_ae-smoke.json (protocol ")
+    assert "**Read from published results (--with-published):** 2 run(s)" in \
+        (other / "runs" / "tiny_ae-smoke" / "results.md").read_text()
+    again = json.loads((other / "results" / "tiny_ae-smoke.json").read_text())
+    assert list(again["results"]["clean"]["seeds"]) == ["22742", "22743", "22744"]
+    sums = json.loads((other / "results" / "tiny_ae-smoke.per_recording.json").read_text())
+    old_sums = json.loads((two_seeds / "results" / "tiny_ae-smoke.per_recording.json")
+                          .read_text())
+    assert sums["clean"]["22742"] == old_sums["clean"]["22742"] and "22744" in sums["clean"]
+    # a second call reuses the run trained here and reads the other two again
+    code, text, err = _main(argv + ["--with-published", two_seeds / "results"])
+    assert code == 0 and "[clean seed 22744] reusing" in text, err
+    # other data than the published table's: refused before anything is written
+    code, _, err = _main(argv[:argv.index("--data") + 1] + [finished["root"] / "x.h5"]
+                         + argv[argv.index("--data") + 2:]
+                         + ["--with-published", two_seeds / "results"])
+    assert code == 2 and "was trained on data 'l30.h5'" in err
+
+
 def test_max_seeds_caps_a_costly_row_and_needs_its_reason(tmp_path):
     """A row's ``max_seeds`` (issue #37: rows over 30 CPU min per seed may keep 3) trains
     only its first seeds; the other rows get all of ``--seeds``; no reason, no table."""

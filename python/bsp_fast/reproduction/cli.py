@@ -70,6 +70,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="after the report, copy the finished table into DIR (e.g. docs/results): "
                         "TABLE-BUDGET.json, .per_recording.json and .md, which "
                         "python -m bsp_fast.reproduction.readme renders into the README")
+    p.add_argument("--with-published", metavar="DIR",
+                   help="with --seeds: take the runs that have no run folder here from the "
+                        "table published in DIR (e.g. docs/results; trained on another "
+                        "machine), their numbers as published and each under its own protocol "
+                        "record; nothing is retrained for them (docs/reproduce.md)")
     p.add_argument("--breakdown", action="store_true",
                    help="also the test breakdown of every row (bsp-eval --breakdown: per joint, "
                         "size or distance bin, profile, missing joints), mean ± std over seeds: "
@@ -106,7 +111,8 @@ def main(argv=None) -> int:
             res = run_table(tab, ns.data, ns.budget, ns.out, seeds=seeds,
                             split_seeds=ns.split_seeds, jobs=ns.jobs, rows=rows,
                             overrides=overrides, force=ns.force, quiet=not ns.verbose,
-                            dry_run=ns.dry_run, allow_changed=ns.allow_changed)
+                            dry_run=ns.dry_run, allow_changed=ns.allow_changed,
+                            with_published=ns.with_published)
             if not ns.dry_run:
                 write_report(tab, res, breakdown=ns.breakdown, force=ns.force)
                 if ns.publish:

@@ -63,6 +63,8 @@ class _Sums:
         self.res, self.docs = res, {}
 
     def _doc(self, path):
+        if isinstance(path, dict):  # a published table's sums, already read (load_published)
+            return path
         if path not in self.docs:
             self.docs[path] = json.loads(Path(path).read_text(encoding="utf-8"))
         return self.docs[path]

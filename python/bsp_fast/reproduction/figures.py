@@ -172,7 +172,8 @@ def learning_curves(tab: dict, res: dict, path=None):
     for name, r in res["results"].items():
         if r.get("source") != "test":
             continue
-        runs = [_val_series(Path(s["run"]), metric) for s in r["seeds"].values()]
+        # runs read from a published table (.restore) have no logs here
+        runs = [_val_series(Path(s["run"]), metric) for s in r["seeds"].values() if s["run"]]
         steps = sorted({k for run in runs for k in run})
         if steps:
             vals = [[run[k] for run in runs if k in run] for k in steps]

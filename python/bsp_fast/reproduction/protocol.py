@@ -210,7 +210,7 @@ def _earlier(mixed: dict) -> str:
 
 
 def guard(base, tab: dict, budget: str, runs, overrides=None, *,
-          allow_changed: bool = False) -> tuple:
+          allow_changed: bool = False, known=None) -> tuple:
     """Checks the runs this call would reuse or continue (``runs``: names ``ROW`` or
     ``ROW/seed-S``) against the ledger of ``base``; returns ``(protocol, ledger)``: the
     protocol of this call (``table_file``, ``hash``, ``hashed``, ``options`` (the given
@@ -218,9 +218,11 @@ def guard(base, tab: dict, budget: str, runs, overrides=None, *,
     ``mixed``: ``{name: {"hash", "options"}}`` of the runs let in under another protocol)
     and the ledger for :func:`record_runs`. Raises :class:`ProtocolChanged` (nothing
     written) when one was made under another hash or other options (or none) unless
-    ``allow_changed``."""
+    ``allow_changed``. ``known``: ``{name: record}`` of runs recorded elsewhere (read from a
+    published table, :mod:`.restore`), entered in the ledger before the check."""
     base = Path(base)
     ledger = _read_ledger(base, tab, budget)
+    ledger["runs"].update(known or {})
     now = {"table_file": tab["path"], "hash": table_hash(tab["path"]), "hashed": HASHED,
            "options": _options(overrides), "code": code_version(), "utc": utc_now()}
     mixed = {}
@@ -271,6 +273,13 @@ def protocol_lines(tab: dict, res: dict) -> list:
             out.append(f"**Mixed protocols (--allow-changed):** {len(p['mixed'])} run(s) "
                        f"were made under {_earlier(p['mixed'])} ('none': not recorded): "
                        f"{', '.join(p['mixed'])}.")
+        if p.get("restored"):
+            froms = sorted({(p.get("runs", {}).get(n) or {}).get("restored_from", "?")
+                            for n in p["restored"]})
+            out.append(f"**Read from published results (--with-published):** "
+                       f"{len(p['restored'])} run(s) trained on another machine, their "
+                       f"numbers as published in {', '.join(froms)}; each keeps the protocol "
+                       "and code it was trained under (its record in results.json).")
     devs = tab.get("deviations") or []
     if devs:
         out += ["", "Deviations from the registered protocol:"]

@@ -25,7 +25,7 @@ from .protocol import finding_label, protocol_lines, table_hash
 from .report import SMOKE_BANNER, results_table, status_text
 from .table_files import load_table
 
-__all__ = ["FORMAT", "MARKER", "published_path", "publish", "findings_table",
+__all__ = ["FORMAT", "MARKER", "published_path", "publish", "load_published", "findings_table",
            "render_section", "render_readme", "differing_sections", "main"]
 
 FORMAT = 1
@@ -79,11 +79,13 @@ def _per_recording(tab: dict, doc: dict) -> dict:
         for seed, s in r["seeds"].items():
             if not s.get("per_recording"):
                 continue
-            d = json.loads(Path(s["per_recording"]).read_text(encoding="utf-8"))
+            d = s["per_recording"]  # read back from a published table (.restore), or a file
+            d = dict(d) if isinstance(d, dict) else json.loads(
+                Path(d).read_text(encoding="utf-8"))
             for section in ("test", "initial"):
                 if d.get(section):
-                    d[section]["metrics"] = {k: v for k, v in d[section]["metrics"].items()
-                                             if k in keep}
+                    d[section] = dict(d[section], metrics={
+                        k: v for k, v in d[section]["metrics"].items() if k in keep})
             out.setdefault(name, {})[seed] = d
     return out
 
@@ -133,6 +135,34 @@ def publish(tab: dict, run_folder, results_dir) -> Path:
     if (base / "results.md").is_file():
         write_text(results_dir / f"{stem}.md", (base / "results.md").read_text(encoding="utf-8"))
     return results_dir / f"{stem}.json"
+
+
+def load_published(path) -> dict:
+    """A published table (``TABLE-BUDGET.json``) read back as a ``results.json``: each
+    seed's ``per_recording`` holds its sums from the sibling ``.per_recording.json``
+    (already read), so that :mod:`.evidence` recomputes intervals and re-run differences
+    from a published table whose run folder is gone (another machine's). ValueError when
+    the file is not a published table of this format or its sums are missing."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: cannot read a published table ({e})") from e
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT or "results" not in doc:
+        raise ValueError(f"{path}: not a published table of format {FORMAT} "
+                         "(bsp-reproduce ... --publish writes them)")
+    if not doc.get("per_recording"):
+        raise ValueError(f"{path}: published without per-recording sums")
+    sums_path = path.parent / Path(doc["per_recording"]).name
+    try:
+        sums = json.loads(sums_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{sums_path}: cannot read the table's sums ({e})") from e
+    for name, r in doc["results"].items():
+        src = r.get("run_of") or name  # a row read from another row's trivial baseline
+        for seed, s in r["seeds"].items():
+            s["per_recording"] = sums.get(src, {}).get(seed)
+    return doc
 
 
 # ---------------------------------------------------------------------- rendering

@@ -27,6 +27,7 @@ from ..training.runs import RunError, read_run, resumable
 from .cost_columns import run_cost
 from .noisy_boxes import noisy_box_metrics
 from .protocol import guard, record_runs
+from .restore import RESTORED_KEY, restorable
 from .table_files import (BUDGETS, RULE_KEYS, check_budget_rule, load_table, prepare_row_data,
                           row_options, wanted_rows)
 
@@ -268,7 +269,7 @@ def _seed_result(run_dir: Path) -> dict:
 def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | None = None,
               split_seeds: bool = False, jobs: int | None = None, rows=None, overrides=None,
               force: bool = False, quiet: bool = True, dry_run: bool = False,
-              allow_changed: bool = False, log=print) -> dict:
+              allow_changed: bool = False, with_published=None, log=print) -> dict:
     """Trains the rows of ``table`` (all, or the names in ``rows``), reusing finished runs
     unless ``force``, and returns ``{"table", "budget", "dir", "data", "seeds",
     "split_seeds", "protocol", "results": {row: {"seeds": {seed: {...one run...}},
@@ -284,7 +285,11 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
     its one run's ``metrics``, ``initial``, ``epochs``, ``best_epoch``, ``seconds`` and
     ``run``). ``seeds=N``: N training seeds per row in ``ROW/seed-S/``, ``jobs`` processes
     at once (one torch thread each when ``jobs`` > 1); the statistics are
-    :func:`.evidence.summarise`'s."""
+    :func:`.evidence.summarise`'s.
+
+    ``with_published=DIR`` (with seeds): the runs of the wanted rows with no run here are
+    read from the published table in ``DIR`` where it has them (:mod:`.restore`), under
+    their own protocol record; ``protocol["restored"]`` names them."""
     tab = table if isinstance(table, dict) else load_table(table)
     if budget not in BUDGETS:
         raise ValueError(f"budget must be one of {list(BUDGETS)}, got {budget!r}")
@@ -304,7 +309,16 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
     names = _run_names(tab, wanted, seed_values, base, budget)
     kept = [n for n, d in names.items()  # reused or continued, not retrained
             if not force and ((d / "metrics.json").is_file() or resumable(d) is not None)]
-    protocol, ledger = guard(base, tab, budget, kept, overrides, allow_changed=allow_changed)
+    restored = {}
+    if with_published is not None:
+        if seed_values is None:
+            raise ValueError("--with-published reads the seeds of a published table: give "
+                             "--seeds")
+        restored = restorable(tab, budget, with_published, data, split_seeds,
+                              [n for n in names if n not in kept and not force])
+    protocol, ledger = guard(base, tab, budget, [*kept, *restored], overrides,
+                             allow_changed=allow_changed,
+                             known={n: rec for n, (_, rec, _) in restored.items()})
     plan = _plan(tab, data, budget, base, wanted, seed_values, split_seeds, overrides,
                  1 if jobs > 1 else None, convert=not dry_run)
     import yaml
@@ -320,6 +334,9 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
                    + yaml.safe_dump(opts, sort_keys=False))
         if dry_run:
             log(f"bsp-train --config {cfg_path}")
+        elif str(run_dir.relative_to(base)) in restored:
+            log(f"[{label}] read from the published "
+                f"{restored[str(run_dir.relative_to(base))][1][RESTORED_KEY]}")
         elif (run_dir / "metrics.json").is_file() and not force:
             log(f"[{label}] reusing {run_dir} (--force to train again)")
         else:  # an interrupted run of an earlier call continues (unless --force)
@@ -332,6 +349,8 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
         return out_res
     record_runs(base, protocol, ledger, fresh)  # before training: interrupted runs count
     out_res["protocol"] = dict(protocol, runs={n: ledger["runs"].get(n) for n in names})
+    if restored:
+        out_res["protocol"]["restored"] = sorted(restored)
     if todo:
         if jobs > 1:
             _convert_once(plan)
@@ -340,14 +359,21 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
     results = out_res["results"]
     for row, seed, run_dir, _ in plan:
         r = results.setdefault(row["name"], {"seeds": {}, "source": "test"})
-        r["seeds"][str(SEED if seed is None else seed)] = one = _seed_result(run_dir)
-        one["metrics"].update(noisy_box_metrics(tab, run_dir, force, quiet, log))
+        back = restored.get(str(run_dir.relative_to(base)))
+        if back:  # published with its noisy-box scores, where the table has them
+            r["seeds"][str(seed)] = one = back[0]
+            r.setdefault("restored_cost", back[2])
+        else:
+            r["seeds"][str(SEED if seed is None else seed)] = one = _seed_result(run_dir)
+            one["metrics"].update(noisy_box_metrics(tab, run_dir, force, quiet, log))
         r["noise"], r["mjp"] = one["noise"], one["mjp"]
         if seed is None:  # the single run's own numbers, as the one-run report reads them
             r.update({k: one[k] for k in ("metrics", "initial", "baseline", "epochs",
                                           "best_epoch", "seconds", "run")})
     for r in results.values():  # parameters and FLOPs of the row's model, its first run
-        r["cost"] = run_cost(next(iter(r["seeds"].values()))["run"])
+        first = next(iter(r["seeds"].values()))["run"]
+        cost = r.pop("restored_cost", {})
+        r["cost"] = run_cost(first) if first else cost
     for row in tab["rows"]:  # rows read from another row's trivial baseline
         src = row.get("initial_of")
         if row["name"] in wanted and src and src in results:

@@ -31,11 +31,12 @@ _COUNTS = ("count", "joints", "crossing")
 def run_dirs(res: dict) -> list:
     """``[(row, seed or None, run_dir)]`` of bsp-reproduce's results (:func:`.runner.run_table`:
     every row holds its runs under ``seeds``; the seed is None for the single-run table);
-    rows that read another row's trivial baseline have no run of their own."""
+    rows that read another row's trivial baseline have no run of their own, nor runs read
+    from a published table (.restore: their checkpoints are on another machine)."""
     single = res.get("seeds") is None
     return [(name, None if single else seed, Path(one["run"]))
             for name, r in res["results"].items() if r.get("source") != "initial"
-            for seed, one in r["seeds"].items()]
+            for seed, one in r["seeds"].items() if one["run"]]
 
 
 def _fresh(run_dir: Path, file: Path) -> bool:
