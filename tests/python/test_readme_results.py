@@ -32,6 +32,30 @@ def test_readme_sections_are_their_rendering():
                      + "; run: python3 -m bsp_fast.reproduction.readme")
 
 
+def test_every_published_mark_recomputes_from_its_published_sums():
+    """The marks the README renders are what the current code computes from the published
+    per-recording sums (``load_published``), for every published table: a change to the
+    statistics that would move a mark fails here until the table is published again
+    (``--with-published`` does that without the run folders)."""
+    import json
+
+    from bsp_fast.reproduction.evidence import evaluate_findings
+    from bsp_fast.reproduction.table_files import load_table
+
+    keys = ("text", "status", "difference", "interval", "p")
+    published = sorted((ROOT / "docs" / "results").glob("*-quick.json"))
+    checked = 0
+    for path in published:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        if doc.get("format") != RM.FORMAT or not doc.get("per_recording"):
+            continue  # not a table (coverage simulation, cross-table comparisons)
+        again = evaluate_findings(load_table(doc["table"]), RM.load_published(path))
+        assert [[f.get(k) for k in keys] for f in again] == \
+            [[f.get(k) for k in keys] for f in doc["findings"]], path.name
+        checked += 1
+    assert checked >= 6  # the four tables, classification at batch 1, the ablations
+
+
 def test_unpublished_tables_show_no_numbers_and_link_their_history():
     for key, body in _sections(README.read_text(encoding="utf-8")).items():
         if (ROOT / "docs" / "results" / f"{key}-quick.json").is_file():
