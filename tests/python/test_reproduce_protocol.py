@@ -431,6 +431,23 @@ def test_with_published_trains_only_the_missing_seeds(finished, two_seeds):
     assert code == 2 and "was trained on data 'l30.h5'" in err
 
 
+def test_bf16_rows_on_a_cpu_without_native_bf16_are_said_once(finished, tmp_path,
+                                                               monkeypatch):
+    """A row set to bf16-mixed on a CPU without AVX512-BF16/AMX trains many times slower:
+    bsp-reproduce says so once, before training, naming the rows; not on a CPU with it."""
+    from bsp_fast.training import precision
+
+    argv = finished["argv"][:-2] + ["--set", "precision=bf16-mixed"]
+    monkeypatch.setattr(precision, "native_bf16", lambda accelerator: False)
+    code, text, err = _main(argv + ["--out", tmp_path / "avx2"])
+    assert code == 0, err
+    assert text.count("note: rows clean are set to bf16-mixed") == 1
+    assert "--set precision=32 trains them in float32" in text
+    monkeypatch.setattr(precision, "native_bf16", lambda accelerator: True)
+    code, text, err = _main(argv + ["--out", tmp_path / "bf16"])
+    assert code == 0 and "note: rows" not in text, err
+
+
 def test_max_seeds_caps_a_costly_row_and_needs_its_reason(tmp_path):
     """A row's ``max_seeds`` (issue #37: rows over 30 CPU min per seed may keep 3) trains
     only its first seeds; the other rows get all of ``--seeds``; no reason, no table."""

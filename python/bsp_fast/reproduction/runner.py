@@ -323,7 +323,7 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
                  1 if jobs > 1 else None, convert=not dry_run)
     import yaml
 
-    todo, fresh = [], []
+    todo, fresh, slow = [], [], []
     for row, seed, run_dir, opts in plan:
         label = row["name"] if seed is None else f"{row['name']} seed {seed}"
         name = row["name"] if seed is None else f"{row['name']}-seed-{seed}"
@@ -343,6 +343,20 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
             todo.append((label, cfg_path, None if force else resumable(run_dir)))
             if todo[-1][2] is None:
                 fresh.append(str(run_dir.relative_to(base)))
+            if str(opts.get("precision")).startswith("bf16") and opts.get("accelerator",
+                                                                          "cpu") == "cpu":
+                slow.append(row["name"])
+    if slow:
+        from ..training.precision import native_bf16
+
+        if not native_bf16("cpu"):  # said once, before hours of training, not per run
+            log(f"note: rows {', '.join(dict.fromkeys(slow))} are set to bf16-mixed (by the "
+                "table file or --set), and this CPU has no native bf16 (AVX512-BF16/AMX): "
+                "they train "
+                "several times slower than in float32 (x0.06-x0.20 measured for the "
+                "convolutional and transformer models; docs/performance.md, 'A real "
+                "AVX2-only CPU'). --set precision=32 trains them in float32, recorded as "
+                "other options (docs/reproduce.md, 'Registered protocol')")
     out_res = {"table": tab["table"], "budget": budget, "dir": str(base), "data": str(data),
                "seeds": seed_values, "split_seeds": bool(split_seeds), "results": {}}
     if dry_run:
