@@ -38,7 +38,7 @@ def restorable(tab: dict, budget: str, results_dir, data, split_seeds: bool,
                          f"{tab['table']} table at the {budget} budget)")
     doc = load_published(path)
     source = f"{path.name} (protocol {doc['protocol']['hash'][:12]})"
-    if doc.get("data") != Path(data).name:
+    if Path(str(doc.get("data"))).name != Path(data).name:  # published: a name, or relative
         raise ValueError(f"--with-published: {path} was trained on data {doc.get('data')!r}, "
                          f"this call's is {Path(data).name!r}: the runs would not be comparable")
     if bool(doc.get("split_seeds")) != bool(split_seeds):
