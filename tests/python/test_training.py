@@ -220,17 +220,19 @@ def test_predict_writes_denormalised_outputs(runs, data, tmp_path):
         assert f1 == pytest.approx(runs["classification"].metrics["f1"])
 
 
-def test_predict_runs_in_the_precision_and_noise_bsp_eval_scores_in(runs, tmp_path,
+def test_predict_runs_in_the_precision_and_noise_bsp_eval_scores_in(runs, data, tmp_path,
                                                                      monkeypatch):
-    """bsp-predict's outputs are the ones bsp-eval scores: on a CPU with native bf16,
-    ``--precision auto`` is bf16-mixed for baseline_3d and simple_transformer, and the
-    predictions are made in bf16 too (they were float32: MPJPE 891.586 mm against the
-    scored 891.425 mm); a --noise override deforms the same clips the same way."""
+    """bsp-predict's outputs are the ones bsp-eval scores: a run trained in bf16-mixed
+    (what ``--precision auto`` picks for baseline_3d on a CPU with native bf16) is
+    predicted in bf16 too (it was float32: MPJPE 891.586 mm against the scored
+    891.425 mm); a --noise override deforms the same clips the same way. The run is
+    trained in bf16-mixed here whatever the CPU: on an AVX2-only CPU ``auto`` trains the
+    shared runs in float32, and both predictions below would be float32."""
     from bsp_fast.training import precision
     from bsp_fast.training.predict import predict
 
     monkeypatch.setattr(precision, "native_bf16", lambda accelerator: True)
-    run = runs["lifting"].run_dir
+    run = _train(data, "lifting", tmp_path / "bf16", precision="bf16-mixed").run_dir
     scored = bsp_fast.evaluate(run, quiet=True).metrics
     res = predict(run, tmp_path / "lifting.h5")
     with h5py.File(res.path) as f:

@@ -335,8 +335,8 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
         if dry_run:
             log(f"bsp-train --config {cfg_path}")
         elif str(run_dir.relative_to(base)) in restored:
-            log(f"[{label}] read from the published "
-                f"{restored[str(run_dir.relative_to(base))][1][RESTORED_KEY]}")
+            record = restored[str(run_dir.relative_to(base))][1]
+            log(f"[{label}] read from the published {record[RESTORED_KEY]}")
         elif (run_dir / "metrics.json").is_file() and not force:
             log(f"[{label}] reusing {run_dir} (--force to train again)")
         else:  # an interrupted run of an earlier call continues (unless --force)
