@@ -26,10 +26,10 @@ RESTORED_KEY = "restored_from"
 
 def restorable(tab: dict, budget: str, results_dir, data, split_seeds: bool,
                missing: list) -> dict:
-    """``{name: (seed result, ledger record, the row's cost)}`` for the runs ``missing`` here (names
-    ``ROW/seed-S``) that the published table in ``results_dir`` holds. ValueError when the
-    published table was made on other data (another folder name) or another split
-    setting, or lacks the protocol record of a run it publishes."""
+    """``{name: (seed result, ledger record, the row's cost)}`` for the runs ``missing``
+    here (names ``ROW/seed-S``) that the published table in ``results_dir`` holds.
+    ValueError when the published table was made on other data (another folder name) or
+    another split setting, or lacks the protocol record of a run it publishes."""
     from .readme import load_published, published_path
 
     path = published_path(results_dir, tab["table"], budget)

@@ -325,6 +325,7 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
 
     todo, fresh, slow = [], [], []
     for row, seed, run_dir, opts in plan:
+        run_name = str(run_dir.relative_to(base))  # as the ledger and `restored` name it
         label = row["name"] if seed is None else f"{row['name']} seed {seed}"
         name = row["name"] if seed is None else f"{row['name']}-seed-{seed}"
         cfg_path = base / "configs" / f"{name}.yaml"
@@ -334,15 +335,14 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
                    + yaml.safe_dump(opts, sort_keys=False))
         if dry_run:
             log(f"bsp-train --config {cfg_path}")
-        elif str(run_dir.relative_to(base)) in restored:
-            record = restored[str(run_dir.relative_to(base))][1]
-            log(f"[{label}] read from the published {record[RESTORED_KEY]}")
+        elif run_name in restored:
+            log(f"[{label}] read from the published {restored[run_name][1][RESTORED_KEY]}")
         elif (run_dir / "metrics.json").is_file() and not force:
             log(f"[{label}] reusing {run_dir} (--force to train again)")
         else:  # an interrupted run of an earlier call continues (unless --force)
             todo.append((label, cfg_path, None if force else resumable(run_dir)))
             if todo[-1][2] is None:
-                fresh.append(str(run_dir.relative_to(base)))
+                fresh.append(run_name)
             if str(opts.get("precision")).startswith("bf16") and opts.get("accelerator",
                                                                           "cpu") == "cpu":
                 slow.append(row["name"])
@@ -352,8 +352,7 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
         if not native_bf16("cpu"):  # said once, before hours of training, not per run
             log(f"note: rows {', '.join(dict.fromkeys(slow))} are set to bf16-mixed (by the "
                 "table file or --set), and this CPU has no native bf16 (AVX512-BF16/AMX): "
-                "they train "
-                "several times slower than in float32 (x0.06-x0.20 measured for the "
+                "they train several times slower than in float32 (x0.06-x0.20 measured for the "
                 "convolutional and transformer models; docs/performance.md, 'A real "
                 "AVX2-only CPU'). --set precision=32 trains them in float32, recorded as "
                 "other options (docs/reproduce.md, 'Registered protocol')")
@@ -370,13 +369,13 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
             _convert_once(plan)
             log(f"training {len(todo)} run(s), {min(jobs, len(todo))} at a time")
         _run(todo, jobs, quiet, log)
-    results = out_res["results"]
+    results, published_cost = out_res["results"], {}
     for row, seed, run_dir, _ in plan:
         r = results.setdefault(row["name"], {"seeds": {}, "source": "test"})
         back = restored.get(str(run_dir.relative_to(base)))
         if back:  # published with its noisy-box scores, where the table has them
             r["seeds"][str(seed)] = one = back[0]
-            r.setdefault("restored_cost", back[2])
+            published_cost.setdefault(row["name"], back[2])
         else:
             r["seeds"][str(SEED if seed is None else seed)] = one = _seed_result(run_dir)
             one["metrics"].update(noisy_box_metrics(tab, run_dir, force, quiet, log))
@@ -384,10 +383,9 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
         if seed is None:  # the single run's own numbers, as the one-run report reads them
             r.update({k: one[k] for k in ("metrics", "initial", "baseline", "epochs",
                                           "best_epoch", "seconds", "run")})
-    for r in results.values():  # parameters and FLOPs of the row's model, its first run
+    for name, r in results.items():  # parameters and FLOPs of the row's model, its first run
         first = next(iter(r["seeds"].values()))["run"]
-        cost = r.pop("restored_cost", {})
-        r["cost"] = run_cost(first) if first else cost
+        r["cost"] = run_cost(first) if first else published_cost.get(name, {})
     for row in tab["rows"]:  # rows read from another row's trivial baseline
         src = row.get("initial_of")
         if row["name"] in wanted and src and src in results:
