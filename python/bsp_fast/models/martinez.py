@@ -4,6 +4,7 @@ from __future__ import annotations
 from torch import nn
 
 from .. import skeleton as _sk
+from .dropout import Dropout
 from .base import LiftingModel, check_float, check_int
 from .registry import register
 
@@ -13,7 +14,7 @@ J = _sk.NUM_JOINTS
 
 
 def _unit(size: int, dropout: float) -> list:
-    return [nn.Linear(size, size), nn.BatchNorm1d(size), nn.ReLU(), nn.Dropout(dropout)]
+    return [nn.Linear(size, size), nn.BatchNorm1d(size), nn.ReLU(), Dropout(dropout)]
 
 
 class _Residual(nn.Module):
@@ -35,6 +36,7 @@ class Baseline3D(LiftingModel):
     batch)."""
 
     cpu_bf16_faster = True  # training 206 -> 533 clips/s in bf16 autocast (docs/training.md)
+    speed_revision = 1  # CPU dropout mask (models/dropout.py): cached probes re-run
 
     def __init__(self, *, linear_size: int = 1024, num_blocks: int = 2, dropout: float = 0.5,
                  use_visible: bool = False):
@@ -45,7 +47,7 @@ class Baseline3D(LiftingModel):
         self._init_visible(use_visible)
         self.net = nn.Sequential(
             nn.Linear(J * self.in_channels, linear_size), nn.BatchNorm1d(linear_size),
-            nn.ReLU(), nn.Dropout(dropout),
+            nn.ReLU(), Dropout(dropout),
             *[_Residual(linear_size, dropout) for _ in range(num_blocks)],
             nn.Linear(linear_size, J * 3))
         for m in self.modules():

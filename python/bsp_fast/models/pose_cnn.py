@@ -6,6 +6,7 @@ import torch
 from torch import nn
 
 from .. import skeleton as _sk
+from .dropout import Dropout
 from .base import (PoseEstimationModel, activation_layout, check_choice, check_float,
                    check_int)
 from .registry import register
@@ -76,7 +77,7 @@ class PoseCNN(PoseEstimationModel):
         self.stage2 = nn.Sequential(*_conv(2 * w, 4 * w, 2, norm), *_conv(4 * w, 4 * w, 1, norm))
         self.stage3 = nn.Sequential(*_conv(4 * w, 8 * w, 2, norm), *_conv(8 * w, 8 * w, 1, norm))
         self.pool = nn.AdaptiveAvgPool2d(4)
-        self.embed = nn.Sequential(nn.Flatten(), nn.Dropout(dropout),
+        self.embed = nn.Sequential(nn.Flatten(), Dropout(dropout),
                                    nn.Linear(8 * w * 16, hidden), nn.ReLU(inplace=True))
         if head == "heatmap":
             self.heatmap = nn.Conv2d(4 * w, J, 1)

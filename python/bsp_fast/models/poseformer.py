@@ -6,6 +6,7 @@ import torch
 from torch import nn
 
 from .. import skeleton as _sk
+from .dropout import Dropout
 from .base import LiftingModel, check_float, check_int
 from .registry import register
 
@@ -35,7 +36,7 @@ class _Attention(nn.Module):
         self.heads = heads
         self.qkv = nn.Linear(dim, dim * 3, bias=True)
         self.proj = nn.Linear(dim, dim)
-        self.attn_drop, self.proj_drop = attn_drop, nn.Dropout(proj_drop)
+        self.attn_drop, self.proj_drop = attn_drop, Dropout(proj_drop)
 
     def forward(self, x):
         B, N, C = x.shape
@@ -55,8 +56,8 @@ class Block(nn.Module):
         self.norm1 = nn.LayerNorm(dim, eps=1e-6)
         self.attn = _Attention(dim, heads, attn_drop, drop)
         self.norm2 = nn.LayerNorm(dim, eps=1e-6)
-        self.mlp = nn.Sequential(nn.Linear(dim, hidden), nn.GELU(), nn.Dropout(drop),
-                                 nn.Linear(hidden, dim), nn.Dropout(drop))
+        self.mlp = nn.Sequential(nn.Linear(dim, hidden), nn.GELU(), Dropout(drop),
+                                 nn.Linear(hidden, dim), Dropout(drop))
         self.drop_path = DropPath(drop_path)
 
     def forward(self, x):
@@ -112,7 +113,7 @@ class PoseFormer(LiftingModel):
         self.spatial_embed = nn.Linear(self.in_channels, c)
         self.spatial_pos = nn.Parameter(torch.zeros(1, J, c))
         self.temporal_pos = nn.Parameter(torch.zeros(1, R, d))
-        self.pos_drop = nn.Dropout(drop_rate)
+        self.pos_drop = Dropout(drop_rate)
         dpr = torch.linspace(0, drop_path_rate, depth).tolist()
         self.spatial_blocks = nn.ModuleList(
             Block(c, num_heads, mlp_ratio, drop_rate, attn_drop_rate, p) for p in dpr)

@@ -8,6 +8,7 @@ import torch
 from torch import nn
 
 from .. import skeleton as _sk
+from .dropout import replace_dropout
 from .base import AutoencoderModel, check_float, check_int
 from .registry import register
 
@@ -47,6 +48,7 @@ class SimpleTransformer(AutoencoderModel):
     default_weight_decay = 1e-2
     positional_encoding = False
     cpu_bf16_faster = True  # training 160 -> 556 clips/s in bf16 autocast (docs/training.md)
+    speed_revision = 1  # CPU dropout mask (models/dropout.py): cached probes re-run
 
     def __init__(self, *, num_layers: int = 6, nhead: int = 2, dim_feedforward: int = 2048,
                  dropout: float = 0.1, use_visible: bool = False):
@@ -63,6 +65,7 @@ class SimpleTransformer(AutoencoderModel):
                                            activation="relu", batch_first=True,
                                            norm_first=False)
         self.encoder = nn.TransformerEncoder(layer, num_layers, enable_nested_tensor=False)
+        replace_dropout(self.encoder)  # its FF and residual dropouts; attention's stays
         if use_visible:
             self.mask_token = nn.Parameter(torch.zeros(J, 2))
 
