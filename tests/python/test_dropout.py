@@ -116,3 +116,34 @@ def _two_steps(seed: int) -> list:
         loss.backward()
         opt.step()
     return [p.detach().clone() for p in net.parameters()]
+
+
+def test_bench_dropout_smoke(capsys, monkeypatch, tmp_path):
+    """benchmarks/bench_dropout.py on PedestrianGraph, two rounds of two steps: its three
+    variants, the old GCN layout computing the same layer as the new one."""
+    import importlib
+    import json
+    import types
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    bench = importlib.import_module("bench_dropout")
+    out = tmp_path / "rows.jsonl"
+    assert bench.main(["--models", "classification/pedestrian_graph", "--rounds", "2",
+                       "--steps", "2", "--json", str(out)]) == 0
+    rows = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [r["variant"] for r in rows] == ["nn.Dropout + permuted GCN", "nn.Dropout", "bsp"]
+    assert all(r["step_cpu_s"] > 0 for r in rows) and rows[1]["vs_nn_dropout"] == 1.0
+    assert "| classification/pedestrian_graph | 64 | bsp |" in capsys.readouterr().out
+    # the benchmark's "before" layer is the same function as the model's
+    torch.manual_seed(0)
+    net = models.create("classification", "pedestrian_graph").eval()
+    x = torch.randn(3, 5, 26, 2)
+    with torch.no_grad():
+        new = net(x)
+        for conv in (net.conv1, net.conv2):
+            conv.forward = types.MethodType(bench._permuted_gcn, conv)
+        torch.testing.assert_close(net(x), new, rtol=1e-5, atol=1e-6)
+    # and the variant really swaps torch's dropout back in
+    swapped = bench._variant(models.create("classification", "pedestrian_graph"), "nn.Dropout")
+    assert type(swapped.dropout) is nn.Dropout
