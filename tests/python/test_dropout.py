@@ -70,6 +70,15 @@ def test_identity_in_eval_and_at_p_zero_and_bf16():
     y = Dropout(0.5).train()(xb)
     assert y.dtype == torch.bfloat16
     assert torch.equal(y[y != 0], (xb * 2)[y != 0])
+    # a scale bf16 cannot hold (1 / 0.9) is applied as torch's scalar product applies it,
+    # not rounded to bf16 first (1.109: a 0.16 % bias)
+    xb = torch.randn(10_000).bfloat16()
+    y = Dropout(0.1).train()(xb)
+    kept = y != 0
+    assert y.dtype == torch.bfloat16
+    assert torch.equal(y[kept], xb[kept] * (1 / 0.9))
+    ratio = (y[kept].double() / xb[kept].double()).mean().item()
+    assert ratio == pytest.approx(1 / 0.9, rel=5e-4)  # the rounded scale: 1.6e-3 off
 
 
 def test_inplace_like_nn_dropout():

@@ -39,7 +39,7 @@ class _DenseGCN(nn.Module):
 
     def forward(self, x: torch.Tensor, adjacency: torch.Tensor) -> torch.Tensor:
         # (B, L, J, C): A (x W) = (A x) W, so the (J, J) neighbour sum runs on the narrower
-        # side (2 channels, not 64, in the first layer: 1.4x the training step on one
+        # side (2 channels, not 64, in the first layer: 1.3-1.4x the training step on one
         # AVX2 core, benchmarks/bench_dropout.py); broadcast matmul, no permuted copies
         if self.weight.shape[0] < self.weight.shape[1]:
             return torch.matmul(torch.matmul(adjacency, x), self.weight) + self.bias
