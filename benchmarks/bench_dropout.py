@@ -101,10 +101,7 @@ def bench_model(name: str, batch: int, length: int, rounds: int, steps: int,
     for v in variants:
         torch.manual_seed(1)
         net = _variant(models.create(task, model), v).train()
-        opt = net.configure_optimizers(lr=None)
-        opt = opt["optimizer"] if isinstance(opt, dict) else (
-            opt[0][0] if isinstance(opt, tuple) else opt)
-        nets[v] = (net, opt)
+        nets[v] = (net, net.configure_optimizers(lr=None)["optimizer"])  # always a dict
     cpu = {v: [] for v in variants}
     for _ in range(rounds):
         for v, (net, opt) in nets.items():

@@ -20,6 +20,8 @@ eval mode it is ``nn.Dropout``.
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 import torch
 from torch import nn
@@ -51,14 +53,22 @@ class Dropout(nn.Dropout):
                 or torch.compiler.is_compiling()):
             return super().forward(x)
         keep, scale = keep_mask(x.shape, self.p)
-        if x.dtype in (torch.float32, torch.float64) or float(
-                torch.tensor(scale, dtype=x.dtype)) == scale:
+        if _holds(scale, x.dtype):
             mask = keep.to(x.dtype).mul_(scale)  # one scaled mask: the fastest form
             return x.mul_(mask) if self.inplace else x * mask
         # bf16 / fp16 cannot hold 1 / 0.9: scale in float32 as torch's own scalar product
         # (and nn.Dropout) does, not by a rounded 1.109 (a 0.16 % bias)
         kept = x.mul_(keep) if self.inplace else x * keep
         return kept.mul_(scale)
+
+
+@lru_cache(maxsize=None)
+def _holds(scale: float, dtype: torch.dtype) -> bool:
+    """Whether a mask of ``dtype`` can hold ``scale`` as torch's scalar product applies it
+    (float32 and float64 compute with it in float32 / float64 anyway); once per (p, dtype),
+    not a tensor per forward."""
+    return dtype in (torch.float32, torch.float64) or float(
+        torch.tensor(scale, dtype=dtype)) == scale
 
 
 def replace_dropout(module: nn.Module) -> nn.Module:
