@@ -156,10 +156,11 @@ def test_sigterm_stops_the_workers_runs_resumably_and_a_rerun_finishes_them(tmp_
                             text=True)
     base = tmp_path / "runs" / "tiny_stop-smoke"
     deadline = time.monotonic() + 240
-    # both runs past their first epoch's checkpoint: a signal before it (in the setup, where
-    # it stops at once) leaves nothing to continue, and on a loaded machine the CSV log this
-    # waited for first appears well before training starts
-    while len(list(base.glob("*/.seed-*/checkpoints/last.ckpt"))) < 2:
+    # both runs past their first epoch's validation (best.ckpt; last.ckpt waits for
+    # --checkpoint-every): a signal before training (in the setup, where it stops at once)
+    # leaves nothing to continue, and on a loaded machine the CSV log this waited for
+    # first appears well before training starts
+    while len(list(base.glob("*/.seed-*/checkpoints/best.ckpt"))) < 2:
         assert proc.poll() is None, proc.communicate()
         assert time.monotonic() < deadline, "the two runs never started training"
         time.sleep(0.2)

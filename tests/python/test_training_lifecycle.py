@@ -75,6 +75,20 @@ def _wait_for_training(out: Path, proc, epoch: int = 3, timeout: float = 120.0) 
     raise AssertionError("bsp-train did not reach the epoch in time")
 
 
+def _wait_for_best(out: Path, proc, timeout: float = 120.0) -> Path:
+    """The run's temporary directory once its first validation wrote best.ckpt: training
+    is in its second epoch or later (the default --checkpoint-every has saved nothing)."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        assert proc.poll() is None, proc.communicate()
+        for tmp in out.parent.glob(f".{out.name}.tmp-*"):
+            if (tmp / "checkpoints" / "best.ckpt").is_file():
+                return tmp
+        time.sleep(0.05)
+    proc.kill()
+    raise AssertionError("bsp-train did not validate in time")
+
+
 def _test_metrics(run: Path) -> dict:
     return json.loads((run / "metrics.json").read_text())["test"]
 
@@ -84,7 +98,8 @@ def test_signal_saves_and_resume_ends_like_an_uninterrupted_run(clips, uninterru
                                                                 tmp_path, signum, code):
     out = tmp_path / "run"
     proc = _start(clips, out, cwd=tmp_path)  # outside the repository
-    _wait_for_training(out, proc)
+    tmp = _wait_for_best(out, proc)
+    assert not (tmp / "checkpoints" / "last.ckpt").exists()  # none due yet (5m)
     proc.send_signal(signum)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == code, err
@@ -122,7 +137,7 @@ def test_fit_seconds_add_up_over_the_processes_of_a_resumed_run(clips, uninterru
     # checkpoint carries the fit seconds so far, and a resumed run adds its own to them
     out = tmp_path / "run"
     proc = _start(clips, out)
-    _wait_for_training(out, proc)
+    _wait_for_best(out, proc)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 143, err
@@ -146,6 +161,29 @@ def test_fit_seconds_add_up_over_the_processes_of_a_resumed_run(clips, uninterru
     # the record says whether it covers every process: carried, or partial (a lower bound)
     assert (sec.get("carried"), sec.get("partial")) == ((True, None) if carry else (None, True))
     assert _test_metrics(out) == uninterrupted.metrics
+
+
+@pytest.mark.parametrize("every, saves", [("1h", 1), ("0", EPOCHS)])
+def test_last_ckpt_is_saved_by_time_and_after_the_last_epoch(clips, uninterrupted, tmp_path,
+                                                              monkeypatch, every, saves):
+    # a save at every epoch end cost 7 % of a run of short epochs; by time, the finished
+    # run still ends with its final state in last.ckpt (0: every epoch end, as before)
+    written = []
+    real = lifecycle.write_bytes
+
+    def counting(path, data, **kw):
+        written.append(Path(path).name)
+        real(path, data, **kw)
+
+    monkeypatch.setattr(lifecycle, "write_bytes", counting)
+    out = tmp_path / "run"
+    res = bsp_fast.train(*MODEL, data=clips, out=out, **_opts(checkpoint_every=every))
+    assert written.count("last.ckpt") == saves
+    assert res.metrics == uninterrupted.metrics
+    a = torch.load(out / "checkpoints" / "last.ckpt", weights_only=True)
+    b = torch.load(uninterrupted.last_checkpoint, weights_only=True)
+    assert a["global_step"] == b["global_step"] == EPOCHS * 6  # 48 clips / batch 8
+    assert all(torch.equal(a["state_dict"][k], b["state_dict"][k]) for k in b["state_dict"])
 
 
 def test_kill_9_resumes_from_the_last_periodic_checkpoint(clips, uninterrupted, tmp_path):
@@ -275,6 +313,7 @@ def test_full_disk_message(clips, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(lifecycle, "write_bytes", failing)
     code = train_main([*MODEL, "--data", str(clips), "--out", str(out), "--epochs", "5",
                        "--batch-size", "8", "--threads", "1", "--quiet",
+                       "--checkpoint-every", "0",  # a save at every epoch end
                        *[f"--hp={k}={v}" for k, v in HP.items()]])
     err = capsys.readouterr().err
     assert code == 1
@@ -416,3 +455,20 @@ def test_fit_time_of_runs_resumed_before_it_was_carried_is_a_lower_bound(tmp_pat
     cost = {"parameters": 10, "flops_per_clip": 2e6}
     assert cost_cells([run], [new, new], cost)[2] == "10.0; 9.0"
     assert cost_cells([run], [new, dict(old, partial=True)], cost)[2] == "≥ 10.0; 9.0"
+
+
+def test_bench_checkpoint_cadence_smoke(tmp_path, monkeypatch, capsys):
+    """benchmarks/bench_checkpoint_cadence.py, one round of 3 short epochs: both cadences
+    run, save last.ckpt as many times as the rule says, and score the same."""
+    import importlib
+
+    monkeypatch.syspath_prepend(str(REPO / "benchmarks"))
+    bench = importlib.import_module("bench_checkpoint_cadence")
+    out = tmp_path / "rows.jsonl"
+    assert bench.main(["--rounds", "1", "--epochs", "3", "--train-clips", "64",
+                       "--json", str(out)]) == 0
+    rows = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [(r["cadence"], r["last_ckpt_saves"]) for r in rows] == [("0", 3), ("5m", 1)]
+    assert all(r["fit_cpu_s"] > 0 and r["same_test_metrics"] for r in rows)
+    assert rows[0]["vs_every_epoch"] == 1.0
+    assert "| 5m |" in capsys.readouterr().out

@@ -176,8 +176,9 @@ OPTIONS: tuple = (
        "off; off by default because on CPU it was slower end to end for every model at the "
        "quick budgets, compile time included (docs/performance.md, Training)", "training",
        choices=("off", "on")),
-    _o("checkpoint_every", "str", "10m", "also save checkpoints/last.ckpt every this long "
-       "within an epoch (e.g. 10m, 90s, 1h; 0: at epoch ends only), so a killed run "
+    _o("checkpoint_every", "str", "5m", "save checkpoints/last.ckpt at the first batch or "
+       "epoch end once this long has passed since the last save, and after the last epoch "
+       "(e.g. 5m, 90s, 1h; 0: at every epoch end and never within one), so a killed run "
        "resumes near where it stopped (--resume)", "training", metavar="DURATION"),
     _o("limit_batches", "int", 0, "use at most this many batches of each split per epoch "
        "(0: all; for smoke tests - metrics then cover part of a split)", "training",

@@ -1,9 +1,11 @@
 """A training run that survives interruption (docs/training.md, "Interrupted runs").
 
-* ``checkpoints/last.ckpt`` is saved at the end of every epoch (``RunCheckpoint``) and,
-  within long epochs, every ``--checkpoint-every`` (:class:`Lifecycle`), each time through
-  :class:`AtomicCheckpointIO`: written under a temporary name and renamed, so a full disk
-  or a kill leaves the previous checkpoint whole.
+* ``checkpoints/last.ckpt`` is saved at the first batch end or epoch end (``RunCheckpoint``)
+  once ``--checkpoint-every`` has passed since the last save, at the end of the last epoch,
+  and at every epoch end with ``--checkpoint-every 0`` (:class:`Lifecycle`), each time
+  through :class:`AtomicCheckpointIO`: written under a temporary name and renamed, so a
+  full disk or a kill leaves the previous checkpoint whole. (A save at every epoch end
+  cost 7 % of a run of 0.9-second epochs: docs/performance.md.)
 * SIGINT and SIGTERM during training finish the current batch, save ``last.ckpt`` and stop
   with :class:`Interrupted` (in an epoch's last batch or its validation: after the
   validation and the end-of-epoch ``last.ckpt``); ``bsp-train`` then leaves the run as an *incomplete* run
@@ -142,17 +144,19 @@ def _set_rng_state(state: dict) -> None:
 
 
 class Lifecycle(Callback):
-    """Periodic ``last.ckpt`` within epochs, signal handling at batch ends, and an exact
-    continuation of a run resumed mid-epoch (see the module docstring).
+    """Periodic ``last.ckpt``, signal handling at batch ends, and an exact continuation of
+    a run resumed mid-epoch (see the module docstring).
 
     ``run_dir``: the run's (temporary) directory; ``every``: seconds between checkpoints
-    within an epoch (0: at epoch ends only); ``sig``: the :func:`signals` state;
+    (0: at every epoch end and never within one); ``sig``: the :func:`signals` state;
     ``marker``: fields written into ``incomplete.json`` with every save."""
 
     def __init__(self, run_dir, every: float, sig: _Signals, marker: dict | None = None):
         self.run_dir, self.every, self.sig = Path(run_dir), float(every), sig
         self.marker = dict(marker or {})
         self.epoch, self.batches_done, self.step = 0, 0, 0
+        #: the position of the last save, what incomplete.json describes
+        self._saved = (0, 0, 0)
         self._last_save = time.monotonic()
         self._resume_rng = None
         self._skip = None
@@ -182,6 +186,7 @@ class Lifecycle(Callback):
         self.carried = tuple(float(x) for x in state.get("fit_seconds", (0.0, 0.0)))
         self.partial = "fit_seconds" not in state
         self._skip = (self.epoch, self.batches_done)
+        self._saved = (self.epoch, self.step, self.batches_done)
         # now, before the train loader's first iterator draws its seed from the global
         # generator (as it did after the save in the uninterrupted run); again at the first
         # batch of a run resumed mid-epoch (see on_train_start)
@@ -257,7 +262,8 @@ class Lifecycle(Callback):
             self.save(trainer, state="running")
 
     def on_train_epoch_start(self, trainer, pl_module) -> None:
-        # a signal during validation: the epoch-end checkpoint is already written
+        # a signal during validation: the epoch-end checkpoint is already written (epoch_end
+        # saves when a signal has come); one after it: incomplete.json names the last save
         stop = self.sig.received
         if trainer.world_size > 1:
             stop = trainer.strategy.broadcast(stop, src=0)
@@ -277,8 +283,16 @@ class Lifecycle(Callback):
 
     def epoch_end(self, trainer) -> None:
         """Saves the state a next epoch starts from (after validation, best.ckpt and early
-        stopping; Lightning's save_last writes last.ckpt only when best.ckpt changes)."""
-        self.save(trainer, state="running")
+        stopping; Lightning's save_last writes last.ckpt only when best.ckpt changes) when
+        a save is due, the run stops after this epoch, or a signal has come. A skipped
+        save costs nothing in exactness: a run continued from an older checkpoint trains
+        the same epochs again to the same weights, ``best.ckpt`` included."""
+        due = not self.every or time.monotonic() - self._last_save >= self.every
+        stop = self.sig.received is not None
+        if trainer.world_size > 1:  # time and signals differ by rank: rank 0 decides
+            due, stop = trainer.strategy.broadcast((due, stop), src=0)
+        if due or stop or _last_epoch(trainer):
+            self.save(trainer, state="running")
 
     def on_train_end(self, trainer, pl_module) -> None:
         self.sig.deferred = False
@@ -289,14 +303,25 @@ class Lifecycle(Callback):
     def save(self, trainer, **fields) -> None:
         trainer.save_checkpoint(self.last_ckpt)  # written by rank 0 only
         self._last_save = time.monotonic()
+        self._saved = (self.epoch, self.step, self.batches_done)
         if trainer.is_global_zero:
             self.write_marker(**fields)
 
     def write_marker(self, **fields) -> None:
-        # epoch: 1-based, the epoch in progress (or just finished) at the checkpoint
-        write_marker(self.run_dir, **self.marker, epoch=self.epoch + 1, step=self.step,
-                     batches_done=self.batches_done, checkpoint="checkpoints/last.ckpt",
-                     **fields)
+        # the last save's position; epoch: 1-based, the epoch in progress (or just
+        # finished) at that checkpoint
+        epoch, step, batches = self._saved
+        write_marker(self.run_dir, **self.marker, epoch=epoch + 1, step=step,
+                     batches_done=batches, checkpoint="checkpoints/last.ckpt", **fields)
+
+
+def _last_epoch(trainer) -> bool:
+    """Whether fit ends after this epoch: early stopping, ``--epochs`` or ``--max-steps``
+    reached (so the finished run's ``last.ckpt`` is its final state)."""
+    epochs, steps = trainer.max_epochs, trainer.max_steps
+    return bool(trainer.should_stop
+                or (epochs is not None and 0 <= epochs <= trainer.current_epoch + 1)
+                or (steps is not None and 0 < steps <= trainer.global_step))
 
 
 # ---------------------------------------------------------------------- the end of a resumed run
