@@ -31,8 +31,11 @@ test: deps
 test-cpp:
 	ctest --test-dir build/wheel --output-on-failure --no-tests=error -j2
 
+# Two pytest workers (pytest-xdist), one per core of the 2-core machines; a file's tests
+# stay on one worker (--dist loadfile), so its module fixtures are made once.
+PYTEST_WORKERS ?= 2
 test-python:
-	$(PY) -m pytest -q tests/python
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile tests/python
 
 # ---------------------------------------------------------------- wheels
 # The binary wheel, built in build/wheel like `install` (after it nothing recompiles), then

@@ -12,7 +12,7 @@ APT_PACKAGES=(
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev ffmpeg
 )
 PIP_PACKAGES=(
-  "numpy>=1.22" "h5py>=3.8" "pyyaml>=6" "tqdm>=4.60" "pandas>=2" "pytest>=7" "av>=12"
+  "numpy>=1.22" "h5py>=3.8" "pyyaml>=6" "tqdm>=4.60" "pandas>=2" "pytest>=7" "pytest-xdist>=3.5" "av>=12"
   "pillow>=10" "pyarrow>=14" "scikit-build-core>=0.10" "pybind11>=2.12"
   "opencv-python-headless>=4.8" "matplotlib>=3.5" "scipy>=1.9" "pycocotools>=2.0.6"
   # Pinned exactly: this version's CPU build is on the machine; a looser pin pulls a
@@ -46,7 +46,7 @@ echo "$PY" > build/.python
 if ! "$PY" - <<'PYEOF' 2>/dev/null
 import importlib.metadata as md, sys
 need = {"numpy": "1.22", "h5py": "3.8", "PyYAML": "6", "tqdm": "4.60", "pandas": "2",
-        "pytest": "7", "av": "12", "pillow": "10", "pyarrow": "14",
+        "pytest": "7", "pytest-xdist": "3.5", "av": "12", "pillow": "10", "pyarrow": "14",
         "scikit-build-core": "0.10", "pybind11": "2.12", "opencv-python-headless": "4.8",
         "matplotlib": "3.5", "scipy": "1.9", "pycocotools": "2.0",
         "torch": "2.13", "lightning": "2.2", "jsonargparse": "4.39", "dask": "2026.8",

@@ -211,7 +211,7 @@ MODULES = {"torch": ["torch", "bsp_fast.data", "bsp_fast.training.train"],
            "preview": ["cv2", "matplotlib", "bsp_fast.preview.cli"],
            "distributed": ["dask.distributed", "bsp_fast.dask_cluster"],
            "loggers": ["tensorboard", "wandb"],
-           "test": ["pytest", "pandas", "av", "PIL", "pyarrow"]}
+           "test": ["pytest", "xdist", "pandas", "av", "PIL", "pyarrow"]}
 extras = {}
 for req in md.requires("bsp_fast") or []:
     m = re.match(r"([A-Za-z0-9_.\-]+).*extra == \"(\w+)\"", req)
