@@ -9,9 +9,10 @@ PedestrianGraph with the classification ablation's matched-updates settings (bat
 ``--epochs`` epochs, alternately with ``--checkpoint-every 0`` (a save at every epoch end,
 the behaviour before 2026-11-27) and ``5m`` (the default: by time, and after the last
 epoch). Without ``--data`` the runs read a generated clip file of about the ablation's
-size (``--train-clips``, default about 832 train windows: 13-14 updates an epoch). Per cadence: the median fit CPU seconds
-(``metrics.json`` ``fit_cpu``: steal on a shared machine does not count), the saves of
-``last.ckpt`` and the test metrics, which must not differ (a save changes no state).
+size (``--train-clips``, default about 832 train windows: 13-14 updates an epoch). Per
+cadence: the median fit CPU seconds (``metrics.json`` ``fit_cpu``: steal on a shared
+machine does not count), the saves of ``last.ckpt`` and the test metrics, which must not
+differ (a save changes no state).
 """
 from __future__ import annotations
 
@@ -60,9 +61,9 @@ def run(data: str, cadence: str, epochs: int, out: Path) -> dict:
                                                        if not data.endswith(".h5") else {}))
     finally:
         lifecycle.write_bytes = real
-    return {"cadence": cadence, "fit_cpu_s": res.seconds["fit_cpu"], "fit_s": res.seconds["fit"],
-            "last_ckpt_saves": saves.count("last.ckpt"), "best_ckpt_saves": saves.count("best.ckpt"),
-            "test": res.metrics}
+    return {"cadence": cadence, "fit_cpu_s": res.seconds["fit_cpu"],
+            "fit_s": res.seconds["fit"], "last_ckpt_saves": saves.count("last.ckpt"),
+            "best_ckpt_saves": saves.count("best.ckpt"), "test": res.metrics}
 
 
 def main(argv=None) -> int:

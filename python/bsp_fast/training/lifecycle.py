@@ -263,7 +263,9 @@ class Lifecycle(Callback):
 
     def on_train_epoch_start(self, trainer, pl_module) -> None:
         # a signal during validation: the epoch-end checkpoint is already written (epoch_end
-        # saves when a signal has come); one after it: incomplete.json names the last save
+        # saves when a signal has come); one in the moment after epoch_end: incomplete.json
+        # names the last save, which the run continues from (none in this process yet: the
+        # run is not kept, bsp-train's check of last.ckpt's time)
         stop = self.sig.received
         if trainer.world_size > 1:
             stop = trainer.strategy.broadcast(stop, src=0)
