@@ -19,16 +19,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import sys
 import tempfile
 from pathlib import Path
 
 CADENCES = ("0", "5m")
-
-
-def _median(v: list) -> float:
-    s = sorted(v)
-    return s[len(s) // 2] if len(s) % 2 else (s[len(s) // 2 - 1] + s[len(s) // 2]) / 2
 
 
 def clip_file(folder: str, train_clips: int) -> str:
@@ -88,12 +84,12 @@ def main(argv=None) -> int:
                 print(f"round {r + 1} --checkpoint-every {c}: fit CPU "
                       f"{got[c][-1]['fit_cpu_s']:.2f} s", flush=True)
     same = all(x["test"] == got[CADENCES[0]][0]["test"] for c in CADENCES for x in got[c])
-    base = _median([x["fit_cpu_s"] for x in got["0"]])
+    base = statistics.median([x["fit_cpu_s"] for x in got["0"]])
     print("| --checkpoint-every | fit CPU s (median) | last.ckpt saves per run | "
           "vs every epoch |\n|---|---|---|---|")
     rows = []
     for c in CADENCES:
-        med = _median([x["fit_cpu_s"] for x in got[c]])
+        med = statistics.median([x["fit_cpu_s"] for x in got[c]])
         row = {"cadence": c, "fit_cpu_s": med, "runs": [x["fit_cpu_s"] for x in got[c]],
                "last_ckpt_saves": got[c][0]["last_ckpt_saves"], "vs_every_epoch": base / med,
                "same_test_metrics": same, "epochs": args.epochs, "load": load,

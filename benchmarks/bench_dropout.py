@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import sys
 import tempfile
 import time
@@ -27,11 +28,6 @@ import time
 #: (task/model, the quick budget's batch size, clip length)
 MODELS = [("classification/pedestrian_graph", 64, 16), ("autoencoder/simple_transformer", 32, 30),
           ("lifting/baseline_3d", 64, 16)]
-
-
-def _median(v: list) -> float:
-    v = sorted(v)
-    return v[len(v) // 2]
 
 
 def _permuted_gcn(self, x, adjacency):
@@ -113,9 +109,9 @@ def bench_model(name: str, batch: int, length: int, rounds: int, steps: int,
                 loss.backward()
                 opt.step()
             cpu[v].append((time.process_time() - t) / steps)
-    base = _median(cpu["nn.Dropout"])
-    return [{"model": name, "batch": batch, "variant": v, "step_cpu_s": _median(cpu[v]),
-             "min_step_cpu_s": min(cpu[v]), "vs_nn_dropout": base / _median(cpu[v]),
+    med = {v: statistics.median_high(t) for v, t in cpu.items()}  # a measured round's time
+    return [{"model": name, "batch": batch, "variant": v, "step_cpu_s": med[v],
+             "min_step_cpu_s": min(cpu[v]), "vs_nn_dropout": med["nn.Dropout"] / med[v],
              "rounds": rounds, "steps": steps} for v in variants]
 
 

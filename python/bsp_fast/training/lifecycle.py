@@ -251,8 +251,7 @@ class Lifecycle(Callback):
         # A signal there stops after the epoch's validation and end-of-epoch checkpoint, as
         # one during validation does (on_train_epoch_start, or bsp-train after fit)
         last = self.batches_done >= trainer.num_training_batches
-        due = bool(self.every) and time.monotonic() - self._last_save >= self.every \
-            and not last
+        due = bool(self.every) and self._elapsed() and not last
         if trainer.world_size > 1:  # every process saves (a collective) or none: rank 0 decides
             stop, due = trainer.strategy.broadcast((stop, due), src=0)
         if stop is not None and not last:
@@ -289,7 +288,7 @@ class Lifecycle(Callback):
         a save is due, the run stops after this epoch, or a signal has come. A skipped
         save costs nothing in exactness: a run continued from an older checkpoint trains
         the same epochs again to the same weights, ``best.ckpt`` included."""
-        due = not self.every or time.monotonic() - self._last_save >= self.every
+        due = not self.every or self._elapsed()
         stop = self.sig.received is not None
         if trainer.world_size > 1:  # time and signals differ by rank: rank 0 decides
             due, stop = trainer.strategy.broadcast((due, stop), src=0)
@@ -301,6 +300,10 @@ class Lifecycle(Callback):
 
     def on_exception(self, trainer, pl_module, exception) -> None:
         self.sig.deferred = False
+
+    def _elapsed(self) -> bool:
+        """Whether ``every`` seconds have passed since the last save."""
+        return time.monotonic() - self._last_save >= self.every
 
     def save(self, trainer, **fields) -> None:
         trainer.save_checkpoint(self.last_ckpt)  # written by rank 0 only
