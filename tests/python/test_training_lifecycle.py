@@ -130,6 +130,31 @@ def test_signal_saves_and_resume_ends_like_an_uninterrupted_run(clips, uninterru
     assert all(torch.equal(a[k], b[k]) for k in b)
 
 
+def test_a_signal_between_epochs_trains_on_to_the_next_batch_and_saves(clips, uninterrupted,
+                                                                       tmp_path, monkeypatch):
+    # the window CI's race hit: a signal after an epoch's end saved nothing (the default
+    # cadence not yet due) and before the next epoch starts. It used to stop there with no
+    # last.ckpt of the process (the run discarded); now the next batch end saves and stops
+    real = lifecycle.Lifecycle.on_train_epoch_start
+
+    def signalled(self, trainer, pl_module):
+        if trainer.current_epoch == 2:
+            os.kill(os.getpid(), signal.SIGINT)  # handled (deferred) before the next line
+        return real(self, trainer, pl_module)
+
+    monkeypatch.setattr(lifecycle.Lifecycle, "on_train_epoch_start", signalled)
+    out = tmp_path / "run"
+    with pytest.raises(lifecycle.Interrupted):
+        bsp_fast.train(*MODEL, data=clips, out=out, **_opts())
+    monkeypatch.setattr(lifecycle.Lifecycle, "on_train_epoch_start", real)
+    ckpt = torch.load(out / "checkpoints" / "last.ckpt", weights_only=True)
+    assert ckpt["global_step"] == 2 * 6 + 1  # two epochs of 6 batches, then one batch
+    marker = json.loads((out / "incomplete.json").read_text())
+    assert (marker["state"], marker["step"]) == ("interrupted", 13)
+    bsp_fast.train(resume=out, quiet=True)
+    assert _test_metrics(out) == uninterrupted.metrics
+
+
 @pytest.mark.parametrize("carry", [[1000.0, 900.0], None])
 def test_fit_seconds_add_up_over_the_processes_of_a_resumed_run(clips, uninterrupted,
                                                                 tmp_path, carry):

@@ -262,13 +262,15 @@ class Lifecycle(Callback):
 
     def on_train_epoch_start(self, trainer, pl_module) -> None:
         # a signal during validation: the epoch-end checkpoint is already written (epoch_end
-        # saves when a signal has come); one in the moment after epoch_end: incomplete.json
-        # names the last save, which the run continues from (none in this process yet: the
-        # run is not kept, bsp-train's check of last.ckpt's time)
+        # saves when a signal has come), stop before the next epoch. One in the moment after
+        # epoch_end's check, when that saved nothing (--checkpoint-every not yet passed):
+        # train on to this epoch's first batch end, which saves and stops (or, in an epoch
+        # of one batch, to its end), so the work since the last save is not lost
         stop = self.sig.received
+        saved_here = self._saved[1] == trainer.global_step  # nothing trained since the save
         if trainer.world_size > 1:
             stop = trainer.strategy.broadcast(stop, src=0)
-        if stop is not None:
+        if stop is not None and saved_here:
             if trainer.is_global_zero:
                 self.write_marker(state="interrupted", signal=signal.Signals(stop).name)
             raise Interrupted(stop)
