@@ -130,6 +130,54 @@ def test_signal_saves_and_resume_ends_like_an_uninterrupted_run(clips, uninterru
     assert all(torch.equal(a[k], b[k]) for k in b)
 
 
+def test_a_stopped_run_continued_then_killed_resumes_from_the_continuation(clips,
+                                                                           uninterrupted,
+                                                                           tmp_path):
+    # stopped (SIGTERM: published as an incomplete run), continued, killed (-9) after the
+    # continuation saved later steps: --resume continues from the continuation's checkpoint,
+    # not the older published one (hours of work on a long run), and the published run
+    # leaves no hidden copy behind, nor the copy of a continuation killed before its save
+    out = tmp_path / "run"
+    proc = _start(clips, out)
+    _wait_for_best(out, proc)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    stopped_at = runs_mod.read_marker(out)["step"]
+    # a continuation killed before it saved: a copy of the stopped run, nothing more
+    early = subprocess.Popen([sys.executable, "-m", "bsp_fast", "train", "--resume", str(out),
+                              "--quiet"], env=_env(), stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    mine = lambda pid: [p for p in out.parent.glob(f".{out.name}.tmp-*")  # noqa: E731
+                        if (runs_mod.read_marker(p) or {}).get("pid") == pid]
+    t0 = time.monotonic()
+    while not mine(early.pid):
+        assert early.poll() is None and time.monotonic() - t0 < 120, early.communicate()
+        time.sleep(0.02)
+    early.kill()
+    early.communicate(timeout=60)
+    # a continuation killed after saving later steps
+    proc = subprocess.Popen([sys.executable, "-m", "bsp_fast", "train", "--resume", str(out),
+                             "--quiet", "--checkpoint-every", "0.05s"], env=_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = time.monotonic()
+    while True:
+        assert proc.poll() is None and time.monotonic() - t0 < 120, proc.communicate()
+        ahead = [p for p in mine(proc.pid)
+                 if (runs_mod.read_marker(p).get("step") or 0) > stopped_at + 12]
+        if ahead:
+            break
+        time.sleep(0.05)
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert runs_mod.resumable(out) == ahead[0]
+    assert runs_mod.resolve_checkpoint(out, "last")[0] == ahead[0] / "checkpoints" / "last.ckpt"
+    res = bsp_fast.train(resume=out, quiet=True)
+    assert res.run_dir == out and not (out / "incomplete.json").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert _test_metrics(out) == uninterrupted.metrics
+
+
 def test_a_signal_between_epochs_trains_on_to_the_next_batch_and_saves(clips, uninterrupted,
                                                                        tmp_path, monkeypatch):
     # the window CI's race hit: a signal after an epoch's end saved nothing (the default

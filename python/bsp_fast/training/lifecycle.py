@@ -33,7 +33,8 @@ from lightning.pytorch.callbacks import Callback
 
 from ..atomic import write_bytes
 from .config import parse_duration  # re-exported: the option's parser
-from .runs import epoch_end_as_completed, write_marker
+from .ckpt_state import epoch_end_as_completed
+from .runs import write_marker
 
 __all__ = ["Interrupted", "OutputWriteError", "CheckpointWriteError", "AtomicCheckpointIO",
            "Lifecycle", "signals", "parse_duration", "epochs_note", "test_checkpoint"]

@@ -18,12 +18,12 @@ import shutil
 from pathlib import Path
 
 from ..atomic import DATASET_FILES, check_outputs, publish, remove, temp_path, write_text
+from .ckpt_state import checkpoint_info
 
 __all__ = ["RunDirectory", "RunError", "default_run_dir", "resolve_checkpoint", "read_run",
            "ENV_TMP", "MARKER", "write_marker", "read_marker", "orphaned_runs",
-           "resume_hint", "resumable", "is_temporary", "refuse_unsafe_output",
-           "check_run_outputs", "run_inputs", "checkpoint_info", "open_run",
-           "epoch_end_as_completed"]
+           "resume_hint", "resumable", "continues", "is_temporary", "refuse_unsafe_output",
+           "check_run_outputs", "run_inputs", "open_run"]
 
 #: Set by the process that created the temporary run directory, so DDP processes that
 #: Lightning starts later (they re-run the command) write into the same directory.
@@ -61,7 +61,7 @@ class RunDirectory:
     def __init__(self, final, *, force: bool = False, copy_from=None, tmp_name=None):
         self.final = Path(final).absolute()
         self.copy_from = None if copy_from is None else Path(copy_from).absolute()
-        in_place = self.copy_from is not None and self.copy_from == self.final
+        in_place = self.copy_from is not None and continues(self.copy_from, self.final)
         self.force = force or in_place
         if self.final.exists() and not (force or in_place):
             raise RunError(f"{self.final} exists; pass --force to replace it (or --resume it)",
@@ -111,12 +111,17 @@ class RunDirectory:
         self._drop_orphan()
 
     def _drop_orphan(self) -> None:
-        """A killed run's temporary directory that this run continued: what is now
-        published under the final name holds all of it and more, and a copy left behind
-        would be found again by :func:`orphaned_runs`."""
+        """Killed runs' temporary directories of this ``--out``: the one this run continued
+        (what is now published holds all of it and more) and any other (a continuation of
+        an incomplete run killed before it saved, or a run the published one replaced):
+        a copy left behind would be found again by :func:`orphaned_runs` and continued
+        instead of what is published."""
         if self.copy_from is not None and is_temporary(self.copy_from) \
                 and self.copy_from != self.tmp:
             remove(self.copy_from)
+        for p in orphaned_runs(self.final):  # processes still alive are not listed
+            if p != self.tmp:
+                remove(p)
 
     def commit(self) -> None:
         if self.committed:
@@ -213,7 +218,7 @@ def refuse_unsafe_output(out, *, force: bool, inputs=(), in_place=None) -> None:
     check_run_outputs(inputs, [("--out", out)])
     if not (out.exists() or out.is_symlink()):
         return
-    if in_place is not None and real == Path(os.path.realpath(in_place)):
+    if in_place is not None and continues(in_place, out):
         return
     if not force:
         raise RunError(f"{out} exists; pass --force to replace it (or --resume it)", code=3)
@@ -277,14 +282,37 @@ def orphaned_runs(out) -> list:
     return [p for _, p in sorted(found, reverse=True)]
 
 
+def continues(source, out) -> bool:
+    """Whether a run resumed from ``source`` continues ``out`` itself (and may replace it
+    without --force): ``source`` is ``out``, or a killed continuation of the incomplete
+    run ``out`` (its temporary directory ``.OUT.tmp-*`` beside it)."""
+    source, out = Path(source), Path(out)
+    if Path(os.path.realpath(source)) == Path(os.path.realpath(out)):
+        return True
+    return (is_temporary(source) and source.name.startswith(f".{out.name}.tmp-")
+            and Path(os.path.realpath(source.parent)) == Path(os.path.realpath(out.parent))
+            and read_marker(out) is not None)
+
+
+def _step(run_dir) -> int:
+    step = (read_marker(run_dir) or {}).get("step")
+    return step if isinstance(step, int) else -1
+
+
 def resumable(run_dir) -> Path | None:
     """The incomplete run to continue for ``run_dir``: the directory itself if it is an
-    interrupted run, else a killed run's temporary directory (None: nothing to continue)."""
+    interrupted run, or a killed continuation of it that saved a later step (its
+    temporary directory); where ``run_dir`` does not exist, a killed run's temporary
+    directory (None: nothing to continue)."""
     p = Path(run_dir)
-    if p.is_dir():
-        ok = read_marker(p) is not None and (p / "checkpoints" / "last.ckpt").is_file()
-        return p if ok else None
     orphans = orphaned_runs(p)
+    if p.is_dir():
+        if read_marker(p) is None or not (p / "checkpoints" / "last.ckpt").is_file():
+            return None
+        # stopped, continued, then killed after a save: the continuation is further on
+        # (a continuation killed before its first save holds a copy: step None)
+        ahead = [o for o in orphans if _step(o) > _step(p)]
+        return max(ahead, key=_step) if ahead else p
     return orphans[0] if orphans else None
 
 
@@ -299,10 +327,10 @@ def resolve_checkpoint(path, which: str = "best") -> tuple:
     """``path`` is a run directory or a ``.ckpt`` file -> ``(ckpt_path, run_dir or None)``.
     ``which``: ``best`` or ``last`` checkpoint of a run directory."""
     p = Path(path)
-    if which == "last" and not p.exists():
-        orphans = orphaned_runs(p)  # a run killed before it could be published
-        if orphans:
-            p = orphans[0]
+    if which == "last" and (not p.exists() or read_marker(p) is not None):
+        # a run killed before it could be published, or an incomplete run's continuation
+        # killed after saving a later step
+        p = resumable(p) or p
     if p.is_dir():
         marker = read_marker(p)
         if marker is not None and which != "last":
@@ -354,72 +382,7 @@ def _finite(obj):
     return obj
 
 
-def epoch_end_as_completed(checkpoint: dict) -> bool:
-    """Marks a ``last.ckpt`` written at an epoch's end (``epoch_end``: after the epoch's
-    validation, best.ckpt and early stopping) as a completed epoch; True if it was one.
-
-    Lightning resumes such a checkpoint by running the epoch's end hooks again when the run
-    has ``max_steps`` (it then always counts as restarting). Their validation metrics are
-    not in the checkpoint, so EarlyStopping raised ("val/loss ... not available") and no
-    run with both ``--max-steps`` and ``--early-stop`` could be resumed; it would also have
-    counted the epoch twice. Without ``max_steps`` Lightning already treats it as completed.
-    With the epoch completed and the batch counters of the epoch in progress at zero, both
-    cases start the next epoch exactly as the uninterrupted run did."""
-    loops = (checkpoint.get("loops") or {}).get("fit_loop")
-    if not loops or "epoch_progress" not in loops:
-        return False
-    epochs = loops["epoch_progress"]
-    t = epochs["total"]
-    if not (t["ready"] == t["started"] == t["processed"] == t["completed"] + 1):
-        return False  # saved mid-epoch, or an epoch already completed
-    batches = loops.get("epoch_loop.batch_progress") or {}
-    if not batches.get("is_last_batch"):
-        return False  # not our epoch-end save: leave it to Lightning
-    for part in ("total", "current"):
-        epochs[part]["completed"] = epochs[part]["processed"]
-    # what Lightning's reset at the start of an epoch does (reset_on_run); the totals stay
-    for key in ("epoch_loop.batch_progress", "epoch_loop.scheduler_progress"):
-        if key in loops:
-            loops[key]["current"] = dict.fromkeys(loops[key]["current"], 0)
-    batches["is_last_batch"] = False
-    optim = loops.get("epoch_loop.automatic_optimization.optim_progress")
-    if optim:
-        for tracker in optim["optimizer"].values():
-            tracker["current"] = dict.fromkeys(tracker["current"], 0)
-    val = loops.get("epoch_loop.val_loop.batch_progress")
-    if val:
-        val["total"] = dict.fromkeys(val["total"], 0)
-    return True
-
-
 # ---------------------------------------------------------------------- opening a run
-def checkpoint_info(ckpt_path) -> dict:
-    """The saved hyper-parameters of a bsp-train checkpoint (task, model, hparams, lr,
-    config), read without building the model."""
-    import torch
-
-    from .tasks import TASKS
-
-    path = Path(ckpt_path)
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
-    except Exception as exc:
-        raise ValueError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") \
-            from None
-    hp = ckpt.get("hyper_parameters") if isinstance(ckpt, dict) else None
-    if not isinstance(hp, dict) or hp.get("task") not in TASKS or "model" not in hp:
-        raise ValueError(f"{path}: not a bsp-train checkpoint (no task/model hyper-parameters)")
-    info = dict(hp)
-    info["epoch"] = ckpt.get("epoch")
-    info["global_step"] = ckpt.get("global_step")
-    # Lightning's current_epoch once --resume restores it: an epoch-end last.ckpt counts its
-    # epoch as completed (the dict here is a copy)
-    epoch_end_as_completed(ckpt)
-    progress = ((ckpt.get("loops") or {}).get("fit_loop") or {}).get("epoch_progress")
-    info["restored_epoch"] = progress["current"]["completed"] if progress else info["epoch"]
-    return info
-
-
 def open_run(run, which: str = "best", what: str = "") -> dict:
     """The one place a run is opened (``bsp-train --resume``, ``bsp-eval``, ``bsp-predict``
     and so ``bsp-reproduce``'s noisy-box scores): the ``which`` checkpoint (best or last)

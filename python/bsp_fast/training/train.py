@@ -15,9 +15,10 @@ from pathlib import Path
 
 from . import config as C
 from ..atomic import OutputOverlapError, atomic_output, refuse, remove
-from .runs import ENV_TMP, MARKER, RunDirectory, RunError, checkpoint_info, default_run_dir, \
-    is_temporary, open_run, read_marker, read_run, refuse_unsafe_output, resume_hint, \
-    write_json, write_marker
+from .ckpt_state import checkpoint_info
+from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, is_temporary, \
+    open_run, read_marker, read_run, refuse_unsafe_output, resume_hint, write_json, \
+    write_marker
 from .precision import check_precision, decide_precision, kept_precision, native_bf16, \
     probe_key, resolve_precision, run_model_key, time_steps
 from .setup import make_datamodule, make_trainer, prepare_data, rank as _rank
