@@ -89,6 +89,15 @@ def _wait_for_best(out: Path, proc, timeout: float = 120.0) -> Path:
     raise AssertionError("bsp-train did not validate in time")
 
 
+def _stop_after_first_validation(clips, out: Path) -> None:
+    """A run stopped by SIGTERM once it validated: an incomplete run at ``out``."""
+    proc = _start(clips, out)
+    _wait_for_best(out, proc)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+
+
 def _test_metrics(run: Path) -> dict:
     return json.loads((run / "metrics.json").read_text())["test"]
 
@@ -138,11 +147,7 @@ def test_a_stopped_run_continued_then_killed_resumes_from_the_continuation(clips
     # not the older published one (hours of work on a long run), and the published run
     # leaves no hidden copy behind, nor the copy of a continuation killed before its save
     out = tmp_path / "run"
-    proc = _start(clips, out)
-    _wait_for_best(out, proc)
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 143, err
+    _stop_after_first_validation(clips, out)
     stopped_at = runs_mod.read_marker(out)["step"]
     # a continuation killed before it saved: a copy of the stopped run, nothing more
     early = subprocess.Popen([sys.executable, "-m", "bsp_fast", "train", "--resume", str(out),
@@ -209,11 +214,7 @@ def test_fit_seconds_add_up_over_the_processes_of_a_resumed_run(clips, uninterru
     # the seconds a run records are its whole fit's, not its last process's: every
     # checkpoint carries the fit seconds so far, and a resumed run adds its own to them
     out = tmp_path / "run"
-    proc = _start(clips, out)
-    _wait_for_best(out, proc)
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 143, err
+    _stop_after_first_validation(clips, out)
     last = out / "checkpoints" / "last.ckpt"
     ckpt = torch.load(last, weights_only=True)
     wall, cpu = ckpt["callbacks"]["BSPLifecycle"]["fit_seconds"]

@@ -33,7 +33,7 @@ from lightning.pytorch.callbacks import Callback
 
 from ..atomic import write_bytes
 from .config import parse_duration  # re-exported: the option's parser
-from .ckpt_state import epoch_end_as_completed
+from .checkpointing import epoch_end_as_completed
 from .runs import write_marker
 
 __all__ = ["Interrupted", "OutputWriteError", "CheckpointWriteError", "AtomicCheckpointIO",

@@ -18,7 +18,7 @@ from pathlib import Path
 import lightning.pytorch as pl
 import torch
 
-from .ckpt_state import checkpoint_info  # noqa: F401  (public here too: the modules' loader)
+from .checkpointing import checkpoint_info  # noqa: F401  (public here too: the modules' loader)
 from .scoring import TaskMetrics
 from .tasks import TASKS, get_task
 

@@ -18,7 +18,6 @@ import shutil
 from pathlib import Path
 
 from ..atomic import DATASET_FILES, check_outputs, publish, remove, temp_path, write_text
-from .ckpt_state import checkpoint_info
 
 __all__ = ["RunDirectory", "RunError", "default_run_dir", "resolve_checkpoint", "read_run",
            "ENV_TMP", "MARKER", "write_marker", "read_marker", "orphaned_runs",
@@ -214,7 +213,6 @@ def refuse_unsafe_output(out, *, force: bool, inputs=(), in_place=None) -> None:
       write (``RunError`` code 2).
     """
     out = Path(out)
-    real = Path(os.path.realpath(out))
     check_run_outputs(inputs, [("--out", out)])
     if not (out.exists() or out.is_symlink()):
         return
@@ -395,6 +393,8 @@ def open_run(run, which: str = "best", what: str = "") -> dict:
         raise ValueError(f"which must be one of ['best', 'last'], got {which!r}")
     ckpt, run_dir = resolve_checkpoint(run, which)
     try:  # truncated, foreign or pickled files: one line
+        from .checkpointing import checkpoint_info  # imports Lightning: only when opened
+
         info = checkpoint_info(ckpt)
     except ValueError as exc:
         raise RunError(f"{what}{exc}") from None

@@ -15,7 +15,6 @@ from pathlib import Path
 
 from . import config as C
 from ..atomic import OutputOverlapError, atomic_output, refuse, remove
-from .ckpt_state import checkpoint_info
 from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, is_temporary, \
     open_run, read_marker, read_run, refuse_unsafe_output, resume_hint, write_json, \
     write_marker
@@ -348,6 +347,7 @@ def _best_epoch(trainer) -> int | None:
     best = trainer.checkpoint_callback
     if not best.best_model_path or best.best_model_score is None:
         return None
+    from .checkpointing import checkpoint_info  # Lightning: imported only once training
     return int(checkpoint_info(best.best_model_path)["epoch"]) + 1
 
 
