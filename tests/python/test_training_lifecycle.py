@@ -61,18 +61,31 @@ def _start(clips, out, *extra, cwd=None):
                             stderr=subprocess.PIPE, text=True)
 
 
-def _wait_for_training(out: Path, proc, epoch: int = 3, timeout: float = 120.0) -> Path:
-    """The run's temporary directory once its marker says ``epoch`` was reached."""
+def _resume(out, *extra):
+    """``bsp-train --resume out --quiet`` started in a process of its own."""
+    cmd = [sys.executable, "-m", "bsp_fast", "train", "--resume", str(out), "--quiet", *extra]
+    return subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+def _wait_for_marker(out: Path, proc, ok=lambda marker: True, timeout: float = 120.0) -> Path:
+    """The temporary directory of ``proc``'s run (its marker names the process) once the
+    marker satisfies ``ok``; the temporary directories of other processes are ignored."""
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
         assert proc.poll() is None, proc.communicate()
         for tmp in out.parent.glob(f".{out.name}.tmp-*"):
             marker = runs_mod.read_marker(tmp) or {}
-            if (marker.get("epoch") or 0) >= epoch:
+            if marker.get("pid") == proc.pid and ok(marker):
                 return tmp
         time.sleep(0.05)
     proc.kill()
-    raise AssertionError("bsp-train did not reach the epoch in time")
+    raise AssertionError("bsp-train's run did not get there in time")
+
+
+def _wait_for_training(out: Path, proc, epoch: int = 3) -> Path:
+    """The run's temporary directory once its marker says ``epoch`` was reached."""
+    return _wait_for_marker(out, proc, lambda marker: (marker.get("epoch") or 0) >= epoch)
 
 
 def _wait_for_best(out: Path, proc, timeout: float = 120.0) -> Path:
@@ -150,33 +163,17 @@ def test_a_stopped_run_continued_then_killed_resumes_from_the_continuation(clips
     _stop_after_first_validation(clips, out)
     stopped_at = runs_mod.read_marker(out)["step"]
     # a continuation killed before it saved: a copy of the stopped run, nothing more
-    early = subprocess.Popen([sys.executable, "-m", "bsp_fast", "train", "--resume", str(out),
-                              "--quiet"], env=_env(), stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True)
-    mine = lambda pid: [p for p in out.parent.glob(f".{out.name}.tmp-*")  # noqa: E731
-                        if (runs_mod.read_marker(p) or {}).get("pid") == pid]
-    t0 = time.monotonic()
-    while not mine(early.pid):
-        assert early.poll() is None and time.monotonic() - t0 < 120, early.communicate()
-        time.sleep(0.02)
+    early = _resume(out)
+    _wait_for_marker(out, early)
     early.kill()
     early.communicate(timeout=60)
     # a continuation killed after saving later steps
-    proc = subprocess.Popen([sys.executable, "-m", "bsp_fast", "train", "--resume", str(out),
-                             "--quiet", "--checkpoint-every", "0.05s"], env=_env(),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    t0 = time.monotonic()
-    while True:
-        assert proc.poll() is None and time.monotonic() - t0 < 120, proc.communicate()
-        ahead = [p for p in mine(proc.pid)
-                 if (runs_mod.read_marker(p).get("step") or 0) > stopped_at + 12]
-        if ahead:
-            break
-        time.sleep(0.05)
+    proc = _resume(out, "--checkpoint-every", "0.05s")
+    ahead = _wait_for_marker(out, proc, lambda m: (m.get("step") or 0) > stopped_at + 12)
     proc.kill()
     proc.communicate(timeout=60)
-    assert runs_mod.resumable(out) == ahead[0]
-    assert runs_mod.resolve_checkpoint(out, "last")[0] == ahead[0] / "checkpoints" / "last.ckpt"
+    assert runs_mod.resumable(out) == ahead
+    assert runs_mod.resolve_checkpoint(out, "last")[0] == ahead / "checkpoints" / "last.ckpt"
     res = bsp_fast.train(resume=out, quiet=True)
     assert res.run_dir == out and not (out / "incomplete.json").exists()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
@@ -287,17 +284,8 @@ def test_a_continued_killed_run_stopped_again_leaves_no_stale_copy(clips, uninte
     proc.kill()
     proc.communicate(timeout=60)
     killed_at = runs_mod.read_marker(orphan)["epoch"]
-    cmd = [sys.executable, "-m", "bsp_fast", "train", "--resume", str(out), "--quiet"]
-    proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-    t0 = time.monotonic()
-    while True:  # the continued run's own temporary directory, past the killed epoch
-        assert proc.poll() is None and time.monotonic() - t0 < 120, proc.communicate()
-        busy = [runs_mod.read_marker(p) or {} for p in out.parent.glob(f".{out.name}.tmp-*")
-                if p != orphan]
-        if any(m.get("pid") == proc.pid and (m.get("epoch") or 0) > killed_at for m in busy):
-            break
-        time.sleep(0.05)
+    proc = _resume(out)  # its own temporary directory, past the killed epoch:
+    _wait_for_marker(out, proc, lambda m: (m.get("epoch") or 0) > killed_at)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 143, err

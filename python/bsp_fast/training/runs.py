@@ -303,14 +303,14 @@ def resumable(run_dir) -> Path | None:
     temporary directory); where ``run_dir`` does not exist, a killed run's temporary
     directory (None: nothing to continue)."""
     p = Path(run_dir)
-    orphans = orphaned_runs(p)
     if p.is_dir():
         if read_marker(p) is None or not (p / "checkpoints" / "last.ckpt").is_file():
-            return None
+            return None  # a finished run, or not a run
         # stopped, continued, then killed after a save: the continuation is further on
         # (a continuation killed before its first save holds a copy: step None)
-        ahead = [o for o in orphans if _step(o) > _step(p)]
+        ahead = [o for o in orphaned_runs(p) if _step(o) > _step(p)]
         return max(ahead, key=_step) if ahead else p
+    orphans = orphaned_runs(p)
     return orphans[0] if orphans else None
 
 
@@ -325,9 +325,9 @@ def resolve_checkpoint(path, which: str = "best") -> tuple:
     """``path`` is a run directory or a ``.ckpt`` file -> ``(ckpt_path, run_dir or None)``.
     ``which``: ``best`` or ``last`` checkpoint of a run directory."""
     p = Path(path)
-    if which == "last" and (not p.exists() or read_marker(p) is not None):
+    if which == "last" and not p.is_file():
         # a run killed before it could be published, or an incomplete run's continuation
-        # killed after saving a later step
+        # killed after saving a later step (a finished run: itself)
         p = resumable(p) or p
     if p.is_dir():
         marker = read_marker(p)
