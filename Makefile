@@ -12,7 +12,7 @@ WERROR ?= OFF
 TESTS ?= OFF
 
 .PHONY: all deps install test test-cpp test-python demo bench clean \
-	fuzz fuzz-build test-asan test-asan-cpp test-tsan wheel wheel-check
+	fuzz fuzz-one fuzz-build test-asan test-asan-cpp test-tsan wheel wheel-check
 all: install
 
 deps:
@@ -107,18 +107,22 @@ fuzz-build: deps
 
 fuzz: fuzz-build
 	@mkdir -p build/fuzz/crashes
-	@for h in $(FUZZ_HARNESSES); do \
-	  mkdir -p build/fuzz/corpus/$$h; \
-	  echo "fuzz_$$h: $(FUZZ_SECONDS) s (log: build/fuzz/$$h.log)"; \
-	  ASAN_OPTIONS=detect_leaks=1 $(UBSAN_ENV) \
-	  build/fuzz/fuzz_$$h build/fuzz/corpus/$$h tests/fuzz/corpus/$$h \
+	@printf '%s\n' $(FUZZ_HARNESSES) | xargs -P $(FUZZ_JOBS) -I{} $(MAKE) -s fuzz-one H={}
+
+# One harness; `make fuzz` runs FUZZ_JOBS of them at once (default 2: one per core of the
+# 2-core machines, so each still gets FUZZ_SECONDS of a core and the wall time halves).
+FUZZ_JOBS ?= 2
+fuzz-one:
+	@mkdir -p build/fuzz/corpus/$(H)
+	@echo "fuzz_$(H): $(FUZZ_SECONDS) s (log: build/fuzz/$(H).log)"
+	@ASAN_OPTIONS=detect_leaks=1 $(UBSAN_ENV) \
+	  build/fuzz/fuzz_$(H) build/fuzz/corpus/$(H) tests/fuzz/corpus/$(H) \
 	    -max_total_time=$(FUZZ_SECONDS) $(FUZZ_FLAGS) \
-	    -artifact_prefix=build/fuzz/crashes/$$h- > build/fuzz/$$h.log 2>&1; rc=$$?; \
+	    -artifact_prefix=build/fuzz/crashes/$(H)- > build/fuzz/$(H).log 2>&1; rc=$$?; \
 	  grep -E '^#[0-9]+[[:space:]]+(INITED|DONE)|^stat::(number_of_executed_units|average_exec_per_sec|peak_rss)' \
-	    build/fuzz/$$h.log; \
-	  if [ $$rc -ne 0 ]; then tail -n 60 build/fuzz/$$h.log; \
-	    echo "fuzz_$$h failed (exit $$rc): input in build/fuzz/crashes/"; exit 1; fi; \
-	done
+	    build/fuzz/$(H).log | sed 's/^/fuzz_$(H): /'; \
+	  if [ $$rc -ne 0 ]; then tail -n 60 build/fuzz/$(H).log; \
+	    echo "fuzz_$(H) failed (exit $$rc): input in build/fuzz/crashes/"; exit 1; fi
 
 # Each step is echoed as a user types it (the console script and its options), and run
 # through the Python `make install` installed into, whose scripts may not be on PATH.
