@@ -93,6 +93,32 @@ def test_train_writes_a_complete_run(runs, task):
                                                                        False)
 
 
+def test_a_run_records_the_machine_that_made_it(runs):
+    """config.yaml names the CPU (model name and bf16-relevant flags, read here from
+    /proc/cpuinfo independently) and core count; bsp-reproduce's tables group runs by it."""
+    import os
+    from pathlib import Path
+
+    from bsp_fast.reproduction.report import machines_note
+
+    info = Path("/proc/cpuinfo").read_text().splitlines()
+    name = next(ln.split(":", 1)[1].strip() for ln in info if ln.startswith("model name"))
+    flags = set(next(ln.split(":", 1)[1].split() for ln in info if ln.startswith("flags")))
+    rec = yaml.safe_load((runs["lifting"].run_dir / "config.yaml").read_text())["machine"]
+    assert rec["cpu"] == name and rec["cpus"] == os.cpu_count() and rec["gpu"] is None
+    assert set(rec["cpu_flags"]) == flags & {"avx2", "avx512f", "avx512_bf16", "amx_bf16",
+                                             "amx_tile"}
+    other = dict(rec, cpu="Other CPU", cpu_flags=[], cpus=16, gpu="Some GPU")
+    note = machines_note({"a": {"seeds": {"1": {"machine": rec}, "2": {"machine": other}}},
+                          "b": {"seeds": {"1": {"machine": rec}, "2": {}}},
+                          "trivial": {"source": "initial", "seeds": {"1": {}}}})
+    flagged = " ".join(rec["cpu_flags"]) or "no avx2/avx512f"
+    assert note == (f"Machines (each run's, from its config.yaml): {name} ({flagged}), "
+                    f"{os.cpu_count()} CPUs: 2 runs (a, b); Other CPU (no avx2/avx512f), 16 "
+                    "CPUs + Some GPU: 1 run (a); not recorded (made before runs recorded it, "
+                    "2026-11-27): 1 run (b).")
+
+
 def test_initial_metrics_are_the_trivial_baselines(runs, data):
     initial = json.loads((runs["classification"].run_dir / "metrics.json").read_text())["initial"]
     assert initial["baseline"] == "majority class"

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from ..atomic import write_text
 from .protocol import finding_label, protocol_lines, table_hash
-from .report import SMOKE_BANNER, results_table, status_text
+from .report import SMOKE_BANNER, machines_note, results_table, status_text
 from .table_files import load_table
 
 __all__ = ["FORMAT", "MARKER", "published_path", "publish", "load_published", "findings_table",
@@ -223,6 +223,7 @@ def _sentences(doc: dict) -> list:
                        "`metrics.json`" + (f"; {partial} of them resumed before fit time was "
                                            "carried over resumes, counted for their last "
                                            "process only" if partial else "") + ").")
+        out.append(machines_note(doc["results"]))
     return out
 
 

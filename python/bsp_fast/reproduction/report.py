@@ -20,7 +20,7 @@ from .protocol import finding_label, mark_exploratory, protocol_lines
 from .table_files import settings_cells, table_header
 
 __all__ = ["format_report", "format_table", "findings_of", "write_report", "results_table",
-           "status_text", "marks_note", "precision_note"]
+           "status_text", "marks_note", "precision_note", "machines_note"]
 
 
 def _md(header, rows) -> str:
@@ -131,6 +131,26 @@ def precision_note(res: dict):
             "difference): " + "; ".join(mixed) + ".")
 
 
+def machines_note(results: dict) -> str:
+    """``Machines: <CPU (flags), N CPUs[ + GPU]>: rows a (seeds ...), b; ...``: where each
+    run was made (its config.yaml's ``machine``: the machine that finished it), so that a
+    table trained on several kinds of CPU, or partly on a GPU, says which rows ran where."""
+    from ..training.precision import machine_text
+
+    by: dict = {}
+    for name, r in results.items():
+        if r.get("source") == "initial" or not isinstance(r.get("seeds"), dict):
+            continue
+        for seed, v in r["seeds"].items():
+            by.setdefault(machine_text(v.get("machine")), {}).setdefault(name, []).append(seed)
+    parts = []
+    for where, rows in sorted(by.items(), key=lambda kv: kv[0] == "not recorded"):
+        n = sum(map(len, rows.values()))
+        when = " (made before runs recorded it, 2026-11-27)" * (where == "not recorded")
+        parts.append(f"{where}{when}: {n} run{'s' * (n != 1)} (" + ", ".join(rows) + ")")
+    return "Machines (each run's, from its config.yaml): " + "; ".join(parts) + "."
+
+
 def format_table(tab: dict, res: dict, findings: list) -> str:
     """Markdown of a table and its ``findings``: one run per row (``res["seeds"]`` None) or
     cells ``mean ± std [95 % interval]`` over seeds, with the findings' differences,
@@ -143,7 +163,8 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
                 _md(header, rows), "",
                 _md(["finding (report)", "ours", "report", "in this run", "status"],
                     [[finding_label(f), f["ours"], f["report"], f.get("direction", "–"),
-                      status_text(f)] for f in findings])]
+                      status_text(f)] for f in findings]),
+                "", machines_note(res.get("results") or {})]
         return "\n".join(text + protocol_lines(tab, res)) + "\n"
     split = "seed varied with the seed" if res.get("split_seeds") else "fixed"
     text = [f"### {tab['title']} — budget {res['budget']}, {len(res['seeds'])} seeds "
@@ -157,6 +178,7 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
                  for f in findings]), "", marks_note(findings, res["budget"])]
     if (note := precision_note(res)) is not None:
         text += ["", note]
+    text += ["", machines_note(res.get("results") or {})]
     return "\n".join(text + protocol_lines(tab, res)) + "\n"
 
 

@@ -263,7 +263,8 @@ def _seed_result(run_dir: Path) -> dict:
             "seconds": _seconds(run_dir, m.get("seconds", {})),
             "precision": m.get("precision"), "run": str(run_dir),
             "per_recording": str(run_dir / BREAKDOWN) if (run_dir / BREAKDOWN).is_file()
-            else None, "noise": run["config"].get("noise"), "mjp": run["config"].get("mjp")}
+            else None, "noise": run["config"].get("noise"), "mjp": run["config"].get("mjp"),
+            "machine": run["config"].get("machine")}
 
 
 def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | None = None,

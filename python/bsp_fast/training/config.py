@@ -261,7 +261,8 @@ def validate(cfg: dict) -> dict:
 # ---------------------------------------------------------------------- YAML
 def read_yaml(path) -> dict:
     """A run config (``--config``): a mapping of option names, safe YAML only; a run's
-    ``config.yaml`` is one (its ``resolved`` and ``versions`` sections are ignored)."""
+    ``config.yaml`` is one (its ``resolved``, ``versions`` and ``machine`` records are
+    ignored)."""
     import yaml
 
     p = Path(path)
@@ -275,14 +276,14 @@ def read_yaml(path) -> dict:
         return {}
     if not isinstance(doc, dict):
         raise ConfigError(f"--config {p}: expected a mapping of option: value")
-    doc = {k: v for k, v in doc.items() if k not in ("resolved", "versions")}
+    doc = {k: v for k, v in doc.items() if k not in ("resolved", "versions", "machine")}
     return normalise(doc, f"--config {p}")
 
 
 def dump(cfg: dict, extra: dict | None = None) -> str:
     """The config as YAML usable as ``--config`` (``--print-config``, ``config.yaml``):
     every option in table order, then ``extra`` (what the run resolved: precision, data
-    file, model hyper-parameters, versions)."""
+    file, model hyper-parameters, versions, machine)."""
     import yaml
 
     doc = {o.name: cfg.get(o.name) for o in OPTIONS}

@@ -29,7 +29,8 @@ from pathlib import Path
 
 __all__ = ["resolve_precision", "decide_precision", "native_bf16", "check_precision",
            "probe_cache_path", "probe_key", "probe_clock", "time_steps", "MARGIN", "cpu_flags",
-           "cpu_summary", "cpu_kernels", "kept_precision", "run_model_key"]
+           "cpu_summary", "cpu_kernels", "kept_precision", "run_model_key", "machine_record",
+           "machine_text"]
 
 #: the CPU flags that decide bf16's speed on a CPU, as benchmarks report them
 SPEED_FLAGS = ("avx2", "avx512f", "avx512_bf16", "amx_bf16", "amx_tile")
@@ -103,6 +104,28 @@ def cpu_summary() -> str:
     """``"<model name>; avx2 avx512f avx512_bf16"``: the line every benchmark prints so that
     its numbers name the kind of CPU they were measured on."""
     return f"{_cpu_name()}; {' '.join(cpu_flags()) or 'none of ' + ' '.join(SPEED_FLAGS)}"
+
+
+def machine_record(accelerator: str = "cpu") -> dict:
+    """What a run's numbers were made on, for its config.yaml and the tables: the CPU's
+    model name and bf16-relevant flags (bf16 is 5-17x slower without them), its core
+    count and, where the run may use one, the GPU's name."""
+    gpu = None
+    if accelerator != "cpu":
+        import torch
+
+        gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else None
+    return {"cpu": _cpu_name(), "cpu_flags": cpu_flags(), "cpus": os.cpu_count(), "gpu": gpu}
+
+
+def machine_text(rec) -> str:
+    """``"AMD EPYC (avx2), 2 CPUs"`` (``+ GPU name``) for a :func:`machine_record`;
+    ``"not recorded"`` for None (runs made before runs recorded it, 2026-11-27)."""
+    if not rec:
+        return "not recorded"
+    flags = " ".join(rec.get("cpu_flags") or []) or "no " + "/".join(SPEED_FLAGS[:2])
+    gpu = f" + {rec['gpu']}" if rec.get("gpu") else ""
+    return f"{rec.get('cpu')} ({flags}), {rec.get('cpus')} CPUs{gpu}"
 
 
 def cpu_kernels() -> str:

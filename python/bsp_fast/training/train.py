@@ -18,8 +18,8 @@ from ..atomic import OutputOverlapError, atomic_output, refuse, remove
 from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, is_temporary, \
     open_run, read_marker, read_run, refuse_unsafe_output, resume_hint, write_json, \
     write_marker
-from .precision import check_precision, decide_precision, kept_precision, native_bf16, \
-    probe_key, resolve_precision, run_model_key, time_steps
+from .precision import check_precision, decide_precision, kept_precision, machine_record, \
+    native_bf16, probe_key, resolve_precision, run_model_key, time_steps
 from .setup import make_datamodule, make_trainer, prepare_data, rank as _rank
 from .tasks import TASKS, get_task
 
@@ -325,19 +325,19 @@ def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds,
 def _write_config(cfg: dict, tmp: Path, precision: str, **resolved) -> None:
     """config.yaml (usable as --config): the options as given, and under ``resolved`` what
     the run resolved, the data and run directory as absolute paths included (so --resume
-    works from any directory)."""
+    works from any directory); its versions and the machine that finished it."""
     import lightning
     import torch
 
     from .. import __version__
-
     extra = {"resolved": {"precision": precision,
                           "data": str(Path(cfg["data"]).absolute()),
                           "out": str(Path(cfg["out"]).absolute()),
                           **{k: (str(Path(v).absolute()) if k == "h5" else v)
                              for k, v in resolved.items()}},
              "versions": {"bsp_fast": __version__, "torch": str(torch.__version__),
-                          "lightning": str(lightning.__version__)}}
+                          "lightning": str(lightning.__version__)},
+             "machine": machine_record(cfg["accelerator"])}
     # force/resume are actions of this command, not settings of the run
     C.write_yaml(dict(cfg, force=False, resume=None), tmp / "config.yaml", extra)
 
