@@ -132,9 +132,10 @@ def precision_note(res: dict):
 
 
 def machines_note(results: dict) -> str:
-    """``Machines: <CPU (flags), N CPUs[ + GPU]>: rows a (seeds ...), b; ...``: where each
-    run was made (its config.yaml's ``machine``: the machine that finished it), so that a
-    table trained on several kinds of CPU, or partly on a GPU, says which rows ran where."""
+    """``Machines (...): <CPU (flags), N CPUs[ + GPU]>: K runs (row a, row b); ...``: where
+    each run was made (its config.yaml's ``machine``: the machine that finished it), so
+    that a table trained on several kinds of CPU, or partly on a GPU, says which rows ran
+    where; runs without the record last, as "not recorded"."""
     from ..training.precision import machine_text
 
     by: dict = {}
