@@ -5,9 +5,9 @@ than one machine's session (the ablation's matched-updates rows, the pose table'
 rows) is finished on another machine. There, ``--with-published docs/results`` takes every
 run of the wanted rows that has no run folder here from the published table
 (``DIR/TABLE-BUDGET.json`` and its per-recording sums, :func:`.readme.load_published`):
-its test metrics, seconds, precision and per-recording sums, exactly as published, and
-its protocol record (the hash and code it was trained under, checked like any reused
-run's). Nothing is trained again for them and no run folder is made; results.json and
+its test metrics, seconds, precision, machine (where recorded) and per-recording sums,
+exactly as published, and its protocol record (the hash and code it was trained under,
+checked like any reused run's). Nothing is trained again for them and no run folder is made; results.json and
 the printed table say which runs were read so. Runs trained here always win.
 
 What a read-back run cannot give: its checkpoint (``--breakdown``, the noisy-box scores
