@@ -35,8 +35,8 @@ export PYTHONPATH=/tmp/site:python:$dir PYTHONUNBUFFERED=1
   python3 -c "import torch, lightning; print('torch', torch.__version__, 'lightning', lightning.__version__)"
   cat /proc/loadavg
 } > "$out/machine.txt" 2>&1
-# 1. why bsp-train asks Lightning for deterministic="warn" on a GPU: pose_temporal's
-# bilinear upsampling has no deterministic CUDA backward, so True stops the run
+# 1. does torch's deterministic mode (bsp-train's deterministic=True) refuse
+# pose_temporal's bilinear upsampling backward on CUDA, as earlier torch releases did?
 python3 - > "$out/deterministic.txt" 2>&1 <<'EOF' || true
 import torch, torch.nn.functional as F
 torch.use_deterministic_algorithms(True)

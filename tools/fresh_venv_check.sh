@@ -104,8 +104,7 @@ extra_venv() {
 }
 # preview and distributed, without torch: a contact sheet, a conversion on a Dask cluster;
 # beside the torch venv (both mostly pip's unpacking, one core each: about 45 s saved)
-(
-  set -e
+(  # set -e holds in the subshell too
   extra_venv viewdask preview,distributed
   "$WORK/venv-viewdask/bin/bsp-preview" clips clips.h5 --n 4 --out grid.png >/dev/null
   test -s grid.png

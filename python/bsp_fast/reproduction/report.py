@@ -158,14 +158,14 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
     intervals and marks; a smoke budget's table under :data:`SMOKE_BANNER`."""
     one = res.get("seeds") is None
     header, rows = _rows(tab, res, one)
+    machines = ["", machines_note(res.get("results") or {})]
     banner = [SMOKE_BANNER, ""] if res.get("budget") == "smoke" else []
     if one:
         text = [f"### {tab['title']} — budget {res['budget']}", "", *banner,
                 _md(header, rows), "",
                 _md(["finding (report)", "ours", "report", "in this run", "status"],
                     [[finding_label(f), f["ours"], f["report"], f.get("direction", "–"),
-                      status_text(f)] for f in findings]),
-                "", machines_note(res.get("results") or {})]
+                      status_text(f)] for f in findings]), *machines]
         return "\n".join(text + protocol_lines(tab, res)) + "\n"
     split = "seed varied with the seed" if res.get("split_seeds") else "fixed"
     text = [f"### {tab['title']} — budget {res['budget']}, {len(res['seeds'])} seeds "
@@ -179,7 +179,7 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
                  for f in findings]), "", marks_note(findings, res["budget"])]
     if (note := precision_note(res)) is not None:
         text += ["", note]
-    text += ["", machines_note(res.get("results") or {})]
+    text += machines
     return "\n".join(text + protocol_lines(tab, res)) + "\n"
 
 
