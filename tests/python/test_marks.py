@@ -1,5 +1,5 @@
-"""Marks a reviewer accepts (#37, items 1-2): the tables' cells and findings from the
-two-level bootstrap over seeds and test recordings, on synthetic per-seed, per-recording
+"""Marks a reviewer accepts (#37, items 1-2; #56): the tables' cells and findings from the
+seed, recording and interaction variance components, on synthetic per-seed, per-recording
 sums with known answers; the rules (5 seeds, 10 recordings), Holm-Bonferroni over a
 table's family, the equivalence margin of an effect's size, the probability of
 improvement, per-clip metrics; and an independent recomputation of two cells and two
@@ -41,16 +41,18 @@ def _write(tmp_path, tab, per_row: dict, initial_offset: float = 50.0, clips=Non
             sec = {"recordings": recs, "metrics": {m: {"num": (v * den[s]).tolist(),
                                                        "den": den[s].tolist()}
                                                    for m in metrics}}
+            off = np.broadcast_to(np.asarray(initial_offset, float), (S, n))[s]
             ini = {"recordings": recs,
-                   "metrics": {m: {"num": ((v + initial_offset) * den[s]).tolist(),
+                   "metrics": {m: {"num": ((v + off) * den[s]).tolist(),
                                    "den": den[s].tolist()} for m in metrics}}
             if clips is not None:
                 sec["clips"] = clips[row][s]
             path = tmp_path / f"{row}-{s}.json"
             path.write_text(json.dumps({"test": sec, "initial": ini, "empty": {}}))
             value = float((v * den[s]).sum() / den[s].sum())
+            first = float(((v + off) * den[s]).sum() / den[s].sum())
             seeds[str(s)] = {"metrics": {m: value for m in metrics},
-                             "initial": {m: value + initial_offset for m in metrics},
+                             "initial": {m: first for m in metrics},
                              "per_recording": str(path), "epochs": 1, "best_epoch": 1}
         res["results"][row] = {"seeds": seeds, "source": "test"}
     return E.summarise(tab, res)
@@ -71,13 +73,22 @@ def _base(S=5, n=20, seed=0, spread=0.5):
     return rng.uniform(60, 120, n)[None, :] + rng.normal(0, spread, (S, 1))
 
 
+def _jit(values, seed=6, sd=0.5):
+    """``values`` plus seed x recording noise: rows of one table share their seed numbers
+    and are paired on them, so a row that is another plus a constant differs from it by
+    exactly that constant, a difference with no variance (inconclusive by rule)."""
+    return values + np.random.default_rng(seed).normal(0, sd, np.shape(values))
+
+
 # ---------------------------------------------------------------------- known answers
 def test_two_identical_rows_are_inconclusive(tmp_path):
     base = _base()
     tab = _lifting([_compare()])
     f = E.evaluate_findings(tab, _write(tmp_path, tab, {"lstm": base, "poseformer": base}))[0]
-    assert f["difference"] == 0.0 and f["p"] == [1.0] and f["status"] == "inconclusive"
-    assert f["rule"] is None and f["p_improvement"][0]["value"] == 0.5  # all ties
+    # no variation of the difference at either level: no p (never p 0 or 1 from an SE of
+    # 0), inconclusive by the stated rule
+    assert f["difference"] == 0.0 and np.isnan(f["p"][0]) and f["status"] == "inconclusive"
+    assert f["rule"] == H.ZERO_SE and f["p_improvement"][0]["value"] == 0.5  # all ties
 
 
 def test_seeds_that_disagree_wildly_are_inconclusive(tmp_path):
@@ -100,9 +111,9 @@ def test_a_large_constant_shift_is_reproduced_and_its_opposite_is_not(tmp_path):
     base = _base()
     tab = _lifting([_compare("lstm", "poseformer", ">", "lstm worse"),
                     _compare("lstm", "poseformer", "<", "lstm better")])
-    res = _write(tmp_path, tab, {"lstm": base + 10.0, "poseformer": base})
+    res = _write(tmp_path, tab, {"lstm": _jit(base + 10.0), "poseformer": base})
     worse, better = E.evaluate_findings(tab, res)
-    assert worse["difference"] == pytest.approx(10.0)
+    assert worse["difference"] == pytest.approx(10.0, abs=0.1)
     assert (worse["status"], better["status"]) == ("reproduced", "not reproduced")
     # every seed of lstm is worse than every seed of poseformer (lower is better)
     assert worse["p_improvement"][0]["value"] == 0.0
@@ -112,7 +123,8 @@ def test_a_large_constant_shift_is_reproduced_and_its_opposite_is_not(tmp_path):
 def test_three_seeds_are_inconclusive_by_rule(tmp_path):
     base = _base(S=3)
     tab = _lifting([_compare()])
-    f = E.evaluate_findings(tab, _write(tmp_path, tab, {"lstm": base + 30, "poseformer": base}))[0]
+    f = E.evaluate_findings(tab, _write(tmp_path, tab, {"lstm": _jit(base + 30),
+                                                        "poseformer": base}))[0]
     assert f["p_holm"][0] < 0.05  # decided by the interval, inconclusive by the rule
     assert f["status"] == "inconclusive"
     assert f["rule"] == "fewer than 5 seeds (lstm: 3, poseformer: 3)"
@@ -122,24 +134,33 @@ def test_three_seeds_are_inconclusive_by_rule(tmp_path):
 def test_eight_recordings_are_inconclusive_by_rule(tmp_path):
     base = _base(n=8)
     tab = _lifting([_compare()])
-    f = E.evaluate_findings(tab, _write(tmp_path, tab, {"lstm": base + 30, "poseformer": base}))[0]
+    f = E.evaluate_findings(tab, _write(tmp_path, tab, {"lstm": _jit(base + 30),
+                                                        "poseformer": base}))[0]
     assert f["p_holm"][0] < 0.05 and f["recordings"] == 8
     assert (f["status"], f["rule"]) == ("inconclusive", "fewer than 10 test recordings (8)")
 
 
 def test_a_row_and_its_trivial_baseline_share_their_seeds(tmp_path):
-    # seeds 30 mm apart, each seed's trivial baseline exactly 50 mm above it: paired by
-    # seed (the same runs), the loss is -50 on every replicate
+    # seeds 30 mm apart, each seed's trivial baseline 50 mm (± 1 mm) above it: paired by
+    # seed (the same runs), the loss is -50 within about a millimetre
     base = _base(spread=30.0)
     tab = _lifting([{"kind": "beats_initial", "metric": "mpjpe_mm", "rows": ["lstm"],
                      "text": "beats its baseline"}])
-    f = E.evaluate_findings(tab, _write(tmp_path, tab, {"lstm": base}))[0]
-    assert f["interval"] == pytest.approx([-50.0, -50.0]) and f["p"] == [0.0]
-    assert f["status"] == "reproduced" and f["p_improvement"][0]["value"] > 0.5
-    # drawn independently, as two rows, the seeds' 30 mm would swamp it
+    jitter = 50.0 + np.random.default_rng(9).normal(0, 1.0, base.shape)
+    f = E.evaluate_findings(tab, _write(tmp_path, tab, {"lstm": base}, jitter))[0]
+    assert -51.5 < f["interval"][0] < f["difference"] < f["interval"][1] < -48.5
+    assert f["p"][0] < 1e-6 and f["status"] == "reproduced"
+    assert f["p_improvement"][0]["value"] > 0.5
+    # unpaired, as two rows with their own seeds, the seeds' 30 mm would swamp it
     num, den = base * 20.0, np.full(base.shape, 20.0)
-    apart = H.two_level([(num, den), (num + 50 * den, den)], lambda v: v[0] - v[1])
-    assert apart.high - apart.low > 40
+    for method in ("t", "vc"):
+        apart = H.two_level([(num, den), (num + jitter * den, den)], lambda v: v[0] - v[1],
+                            method=method)
+        assert apart.high - apart.low > 40, method
+    # exactly 50 mm above on every seed and recording: no variance, no p, inconclusive
+    f = E.evaluate_findings(tab, _write(tmp_path, tab, {"lstm": base}))[0]
+    assert f["interval"] == pytest.approx([-50.0, -50.0]) and np.isnan(f["p"][0])
+    assert (f["status"], f["rule"]) == ("inconclusive", H.ZERO_SE)
 
 
 def test_the_seeds_only_interval_is_the_t_interval_over_seeds():
@@ -173,9 +194,11 @@ def test_holm_over_the_table_family_turns_marginal_findings_inconclusive(tmp_pat
     # two comparisons with raw p ~ 0.04 and one clear one: each marginal one alone is
     # decided; in the family of three Holm multiplies the smaller marginal p by 2
     base = _base(spread=0.0)
-    off = np.array([[-1.5], [1.0], [0.5], [-0.8], [0.8]])
+    # rows of one seed numbers are paired on them: the differences vary by seed only
+    # (t with 4 df at p 0.035)
+    off = np.array([[-3.9], [2.6], [1.3], [-2.08], [2.08]])
     rows = {"poseformer": base, "lstm": base + 4.0 + off, "baseline_3d": base + 4.0 + off,
-            "lstm_relative_rot": base + 40}
+            "lstm_relative_rot": base + 40 + np.random.default_rng(8).normal(0, 1, base.shape)}
     one = _lifting([_compare("lstm", "poseformer", ">", "m1")])
     alone = E.evaluate_findings(one, _write(tmp_path, one, rows))[0]
     tab = _lifting([_compare("lstm", "poseformer", ">", "m1"),
@@ -207,10 +230,11 @@ def test_equivalence_margin_in_and_out(tmp_path):
         U.equivalence(iv, 0.1, -1)
     ae = R.load_table("autoencoder")
     clean = np.random.default_rng(3).uniform(0.8, 1.0, 20)[None, :] + np.zeros((5, 1))
+    noise = np.random.default_rng(4).normal(0, 0.005, clean.shape)
 
     def size(loss, **extra):
         tab = dict(ae, findings=[dict(ae["findings"][1], **extra)])
-        res = _write(tmp_path, tab, {"clean": clean, "noisy": clean - loss})
+        res = _write(tmp_path, tab, {"clean": clean, "noisy": clean - loss + noise})
         return E.evaluate_findings(tab, res)[0]
 
     f = size(0.1)  # report: about 10 p.p.; default margin half of it
@@ -266,8 +290,8 @@ def test_a_per_clip_metric_is_resampled_from_its_recordings_clips(tmp_path):
         res["results"]["a"]["seeds"][str(s)] = {"metrics": {"auroc": 0.75},
                                                 "initial": {}, "per_recording": str(path)}
     E.summarise(tab, res)
-    # replicates: 1 (the first recording only), 0 (the second only) or 0.75 (both); the t
-    # interval, symmetric about the value on every clip and wider than 0.5, is cut at 1
+    # jackknife over two recordings (1 without the second, 0 without the first): a wide
+    # interval, inside [0, 1] without cutting (Clopper-Pearson at the effective size)
     low, high = res["results"]["a"]["interval"]["auroc"]
     assert high == 1.0 and 0.0 <= low < 0.5
     bad = dict(sec, clips=[[[0.9]], []])
@@ -278,27 +302,42 @@ def test_a_per_clip_metric_is_resampled_from_its_recordings_clips(tmp_path):
 
 
 # ---------------------------------------------------------------------- recomputation
-def _independent(rows, fn, B=4000, seed=123):
-    """The two-level t interval and p, written out with loops (numpy and scipy only):
-    recordings drawn once per replicate for every row, each row's seeds drawn anew, each
-    row's seed deviations scaled by sqrt(S / (S - 1)), value ± t(sum S - 1) x sd."""
-    rng = np.random.default_rng(seed)
-    n = rows[0][0].shape[1]
+def _independent(rows, fn, log=False):
+    """The variance-components interval and p, written out with loops (numpy and scipy
+    only): each seed's ratio linearised on each recording (``v + R (num - v den) / D``),
+    the statistic's terms ``W`` the rows' terms times fn's coefficients (fn is linear; the
+    rows share their seed numbers, so they are paired on seeds), the two-way ANOVA mean
+    squares of ``W`` (seeds x recordings), ``V = (MS_seed + MS_rec - MS_int) / (S R)``
+    (the seed part left out when MS_seed < MS_int), Satterthwaite's df; ``log``: the t
+    interval of the log (a cell in mm)."""
+    S, n = rows[0][0].shape
+    zero = fn([0.0] * len(rows))
+    coef = [fn([1.0 if j == i else 0.0 for j in range(len(rows))]) - zero
+            for i in range(len(rows))]
+    W = np.zeros((S, n))
+    for c, (num, den) in zip(coef, rows):
+        for s in range(S):
+            D = den[s].sum()
+            v = num[s].sum() / D
+            for r in range(n):
+                W[s, r] += c * (v + n * (num[s, r] - v * den[s, r]) / D)
     value = fn([np.mean(num.sum(1) / den.sum(1)) for num, den in rows])
-    reps = []
-    for _ in range(B):
-        idx = rng.choice(n, n, replace=True)
-        vals = []
-        for num, den in rows:
-            S = num.shape[0]
-            per_seed = num[:, idx].sum(1) / den[:, idx].sum(1)
-            drawn = per_seed[rng.choice(S, S, replace=True)].mean()
-            vals.append(per_seed.mean() + np.sqrt(S / (S - 1)) * (drawn - per_seed.mean()))
-        reps.append(fn(vals))
-    se = np.std(reps, ddof=1)
-    df = sum(num.shape[0] - 1 for num, _ in rows)
-    half = stats.t.ppf(0.975, df) * se
-    return value, value - half, value + half, 2 * stats.t.sf(abs(value) / se, df)
+    grand, rm, cm = W.mean(), W.mean(1), W.mean(0)
+    ms_s = n * sum((x - grand) ** 2 for x in rm) / (S - 1)
+    ms_r = S * sum((x - grand) ** 2 for x in cm) / (n - 1)
+    ms_i = sum((W[s, r] - rm[s] - cm[r] + grand) ** 2 for s in range(S)
+               for r in range(n)) / ((S - 1) * (n - 1))
+    terms = [(1, ms_r, n - 1)]
+    if ms_s > ms_i:
+        terms += [(1, ms_s, S - 1), (-1, ms_i, (S - 1) * (n - 1))]
+    total = sum(c * m for c, m, _ in terms)
+    df = total ** 2 / sum((c * m) ** 2 / d for c, m, d in terms)
+    se = np.sqrt(total / (S * n))
+    q = stats.t.ppf(0.975, df)
+    if log:
+        f = np.exp(q * se / value)
+        return value, value / f, value * f, 2 * stats.t.sf(abs(value) / se, df)
+    return value, value - q * se, value + q * se, 2 * stats.t.sf(abs(value) / se, df)
 
 
 def test_two_cells_and_two_marks_recomputed_independently(tmp_path):
@@ -319,15 +358,15 @@ def test_two_cells_and_two_marks_recomputed_independently(tmp_path):
                 for s in res["results"][row]["seeds"].values()]
         raw[row] = (np.array([s["num"] for s in secs]), np.array([s["den"] for s in secs]))
     for row in ("poseformer", "lstm"):  # the cells: mean ± std [interval]
-        value, low, high, _ = _independent([raw[row]], lambda v: v[0])
+        value, low, high, _ = _independent([raw[row]], lambda v: v[0], log=True)
         per_seed = raw[row][0].sum(1) / raw[row][1].sum(1)
         cell = re.search(rf"^\| {row} \| [^|]+ \| ([\d.]+) ± ([\d.]+) \[([\d.]+), ([\d.]+)\]",
                          text, re.M).groups()
         assert float(cell[0]) == pytest.approx(value, abs=0.006)
         assert float(cell[1]) == pytest.approx(np.std(per_seed, ddof=1), abs=0.006)
-        tol = 0.04 * (high - low) / 2 + 0.006  # Monte Carlo error of two bootstraps
-        assert float(cell[2]) == pytest.approx(low, abs=tol)
-        assert float(cell[3]) == pytest.approx(high, abs=tol)
+        assert float(cell[2]) == pytest.approx(low, abs=0.006)  # printed to 2 decimals
+        assert float(cell[3]) == pytest.approx(high, abs=0.006)
+        assert high - value > value - low  # on the log: longer above than below
     # the two marks: t tests of the two differences, Holm over the family of two by hand
     diff = lambda v: v[0] - v[1]  # noqa: E731
     first = _independent([raw["lstm"], raw["poseformer"]], diff)
@@ -339,9 +378,8 @@ def test_two_cells_and_two_marks_recomputed_independently(tmp_path):
         line = next(ln for ln in text.splitlines() if ln.startswith(f"| {name} |"))
         got = re.search(r"([-+]?[\d.]+) \[([-+]?[\d.]+), ([-+]?[\d.]+)\]", line).groups()
         assert float(got[0]) == pytest.approx(value, abs=0.006)
-        tol = 0.04 * (high - low) / 2 + 0.006
-        assert float(got[1]) == pytest.approx(low, abs=tol)
-        assert float(got[2]) == pytest.approx(high, abs=tol)
+        assert float(got[1]) == pytest.approx(low, abs=0.006)
+        assert float(got[2]) == pytest.approx(high, abs=0.006)
         # lower is better: "a worse than b" is a − b above 0
         want = "inconclusive" if holm[praw] >= 0.05 else (
             "reproduced" if value > 0 else "not reproduced")
@@ -350,19 +388,29 @@ def test_two_cells_and_two_marks_recomputed_independently(tmp_path):
         if printed[0]:  # "< 0.001"
             assert holm[praw] < 0.002
         else:
-            assert float(printed[1]) == pytest.approx(holm[praw], abs=0.01 + 0.1 * holm[praw])
+            assert float(printed[1]) == pytest.approx(holm[praw], abs=0.0006)
         marks.append(want)
     assert marks == ["reproduced", "inconclusive"]  # 10 mm apart is decided, 0.5 mm is not
 
 
-def test_cell_intervals_stay_inside_what_the_metric_can_take():
-    from bsp_fast.reproduction.evidence import _in_support
-
-    assert _in_support("f1", [0.861, 1.040]) == [0.861, 1.0]
-    assert _in_support("pck_0.05", [-0.13, 0.6]) == [0.0, 0.6]
-    assert _in_support("mpjpe_mm", [-3.0, 12.0]) == [0.0, 12.0]
-    assert _in_support("mpjve_mm", [-1.0, 2.0]) == [0.0, 2.0]  # mm per frame
-    assert _in_support("loss", [-1.0, 2.0]) == [-1.0, 2.0]  # no stated bound
+def test_cell_intervals_respect_what_the_metric_can_take_without_clipping():
+    assert E.support("f1") == (0.0, 1.0) and E.support("pck_0.05") == (0.0, 1.0)
+    assert E.support("mpjpe_mm") == (0.0, np.inf) == E.support("mpjve_mm")  # mm per frame
+    assert E.support("loss") is None  # no stated bound
+    # F1 0.95, SE 0.04, 20 df: the symmetric t interval would reach 1.03; Clopper-Pearson
+    # at the effective sample size (Korn & Graubard) stays below 1 and is longer below
+    low, high = H.bounded_interval(0.95, 0.04, 20, (0.0, 1.0))
+    assert 0.75 < low < 0.95 < high < 1.0 and 0.95 - low > high - 0.95
+    # a large effective sample: the symmetric t interval
+    low, high = H.bounded_interval(0.5, 0.01, 1e6, (0.0, 1.0))
+    assert (low, high) == pytest.approx((0.5 - 1.96 * 0.01, 0.5 + 1.96 * 0.01), abs=2e-4)
+    # 19 of 19 recordings perfect, no variance: a bound from the counts, 0.025^(1/19)
+    assert H.bounded_interval(1.0, 0.0, np.inf, (0.0, 1.0), 19) == (
+        pytest.approx(0.025 ** (1 / 19)), 1.0)
+    low, high = H.bounded_interval(4.0, 2.0, 10, (0.0, np.inf))  # mm: on the log
+    assert 0 < low < 4.0 < high and low * high == pytest.approx(16.0)
+    assert H.bounded_interval(4.0, 2.0, 10) == pytest.approx(
+        (4 - stats.t.ppf(0.975, 10) * 2, 4 + stats.t.ppf(0.975, 10) * 2))
 
 
 def test_the_seed_rule_binds_each_comparison_of_an_ordering(tmp_path):
@@ -374,7 +422,7 @@ def test_the_seed_rule_binds_each_comparison_of_an_ordering(tmp_path):
 
     def order(rows):
         tab = _lifting([{"kind": "order", "metric": "mpjpe_mm", "rows": rows, "text": "o"}])
-        res = _write(tmp_path, tab, {"poseformer": base - 30, "lstm": base + 30,
+        res = _write(tmp_path, tab, {"poseformer": base - 30, "lstm": _jit(base + 30),
                                      "baseline_3d": base})
         for s in ("3", "4"):
             del res["results"]["poseformer"]["seeds"][s]

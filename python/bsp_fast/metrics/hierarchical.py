@@ -30,10 +30,12 @@ from ..defaults import SEED
 from .uncertainty import CONFIDENCE, N_RESAMPLES, Interval
 
 __all__ = ["Ratios", "Clips", "Test", "two_level", "seed_recording_interval",
+           "variance_components", "pseudo_values", "bounded_interval", "satterthwaite",
+           "ZERO_SE",
            "probability_of_improvement", "simulate_coverage", "row_values", "METHODS",
            "LEVELS"]
 
-METHODS = ("percentile", "corrected", "t")
+METHODS = ("percentile", "corrected", "t", "vc")
 #: ``both``: seeds and recordings resampled; ``seeds``: seeds only, the recordings fixed
 LEVELS = ("both", "seeds")
 
@@ -103,11 +105,14 @@ class Clips:
 @dataclass(frozen=True)
 class Test(Interval):
     """An :class:`Interval` with the test of "the statistic is 0" that matches it: ``p``
-    two-sided (``t``: the t test with ``df`` degrees of freedom and standard error ``se``;
-    otherwise twice the share of replicates beyond 0), NaN when undefined."""
+    two-sided (``t``, ``vc``: the t test with ``df`` degrees of freedom and standard error
+    ``se``; otherwise twice the share of replicates beyond 0), NaN when undefined (``vc``:
+    also when ``se`` is 0, see :data:`ZERO_SE`). ``components``: ``vc``'s variance
+    components of the statistic (:func:`variance_components`), else None."""
     p: float = float("nan")
     se: float = float("nan")
-    df: int = 0
+    df: float = 0
+    components: dict | None = None
 
 
 def _part(p):
@@ -175,7 +180,8 @@ def _mean(a, axis):
 
 def two_level(rows, fn=lambda v: v[0], *, groups=None, seed_keys=None,
               confidence: float = CONFIDENCE, n_resamples: int = N_RESAMPLES,
-              seed: int = SEED, method: str = "t", levels: str = "both") -> Test:
+              seed: int = SEED, method: str = "t", levels: str = "both",
+              support=None) -> Test:
     """The value, interval and test of ``fn(row values)``. ``rows``: :class:`Ratios`,
     :class:`Clips` or ``(num, den)`` pairs of shape (seeds, recordings); a row's value is
     its mean over seeds. ``fn`` takes the list of row values (floats, or arrays of
@@ -184,11 +190,15 @@ def two_level(rows, fn=lambda v: v[0], *, groups=None, seed_keys=None,
     default: one test set); ``seed_keys``: one key per row, rows of one key share their
     seed draw (the same runs; default: every row its own). ``levels``: :data:`LEVELS`.
     ``n``: the smallest test set's recordings. NaN bounds and p with fewer than two
-    recordings, or (``t``) when no row has two seeds."""
+    recordings, or (``t``) when no row has two seeds. ``method='vc'``: no resampling, see
+    :func:`variance_components` (``support`` is its argument)."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {list(METHODS)}, got {method!r}")
     if levels not in LEVELS:
         raise ValueError(f"levels must be one of {list(LEVELS)}, got {levels!r}")
+    if method == "vc":
+        return variance_components(rows, fn, groups=groups, seed_keys=seed_keys,
+                                   confidence=confidence, levels=levels, support=support)
     parts, groups, keys = _setup(rows, groups, seed_keys)
     full = [_mean(p.values(np.ones((1, p.shape[1]))), 1)[0] for p in parts]
     value = float(fn(full))
@@ -217,13 +227,207 @@ def two_level(rows, fn=lambda v: v[0], *, groups=None, seed_keys=None,
         t = require("scipy.stats", "seed and recording intervals").t
         se = float(np.std(reps, ddof=1))
         half = float(t.ppf(1 - alpha, df)) * se
-        # a zero-width interval (no variance at either level) decides by the value alone
+        # a zero-width interval (no variance at either level) bounds nothing: no p (ZERO_SE)
         tiny = 1e-12 * max(1.0, abs(value))
-        p = float(2 * t.sf(abs(value) / se, df)) if se > tiny else float(abs(value) <= tiny)
+        p = float(2 * t.sf(abs(value) / se, df)) if se > tiny else float("nan")
         return Test(value, value - half, value + half, R, p, se, df)
     low, high = np.quantile(reps, [alpha, 1 - alpha])
     p = min(1.0, 2 * min(float(np.mean(reps <= 0)), float(np.mean(reps >= 0))))
     return Test(value, float(low), float(high), R, p, float(np.std(reps, ddof=1)), df)
+
+
+# ---------------------------------------------------------------- variance components
+#: why a ``vc`` test has no p-value (its mark is inconclusive by this rule)
+ZERO_SE = "standard error 0 (no variation at either level: the sums bound no variance)"
+
+
+def pseudo_values(part) -> np.ndarray:
+    """(S, R) linearised values of one row: ``z[s, r]`` averages over the recordings to
+    seed s's value, and its spread over recordings is the first-order spread of that
+    value when the recordings are resampled. :class:`Ratios`: the delta method for a ratio
+    of sums, ``v_s + R (num - v_s den) / D_s`` (Woodruff 1971); a seed with no
+    denominator is its ``empty`` value everywhere. :class:`Clips`: the jackknife
+    pseudo-values ``R v_s - (R - 1) v_s(-r)`` over recordings (Quenouille-Tukey)."""
+    S, R = part.shape
+    full = part.values(np.ones((1, R)))[0]
+    if isinstance(part, Ratios):
+        D = part.den.sum(1, keepdims=True)
+        v = full[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            z = v + R * (part.num - v * part.den) / np.where(D > 0, D, 1.0)
+        return np.where(D > 0, z, np.broadcast_to(v, z.shape))
+    loo = part.values(1.0 - np.eye(R))  # (R, S): each recording left out
+    return R * full[:, None] - (R - 1) * loo.T
+
+
+def _gradient(fn, full) -> np.ndarray:
+    """``fn``'s derivative in each row's value at ``full`` (central differences; the
+    findings' functions are linear, so exact up to rounding)."""
+    full = np.asarray(full, np.float64)
+    g = np.zeros(len(full))
+    for k in range(len(full)):
+        h = 1e-6 * max(1.0, abs(full[k])) if np.isfinite(full[k]) else 1e-6
+        up, down = full.copy(), full.copy()
+        up[k] += h
+        down[k] -= h
+        g[k] = (float(fn(list(up))) - float(fn(list(down)))) / (2 * h)
+    return np.where(np.abs(g) < 1e-9, 0.0, g)
+
+
+def _blocks(parts, groups, keys, grad) -> dict:
+    """``{(seed key, test set): W}``: the linearised statistic's (S, R) terms, the rows of
+    one seed key on one test set summed with their weights (rows of weight 0 left out)."""
+    blocks, width = {}, {}
+    for p, grp, k, w in zip(parts, groups, keys, grad):
+        if w == 0:
+            continue
+        if width.setdefault(grp, p.shape[1]) != p.shape[1]:
+            raise ValueError(f"rows of one test set must be aligned on the same recordings "
+                             f"(one column each), got {width[grp]} and {p.shape[1]}")
+        z = w * pseudo_values(p)
+        have = blocks.get((k, grp))
+        if have is not None and have.shape != z.shape:
+            raise ValueError(f"rows that share seeds must have as many: {have.shape[0]} "
+                             f"and {z.shape[0]}")
+        blocks[(k, grp)] = z if have is None else have + z
+    return blocks
+
+
+def _terms(blocks: dict, levels: str) -> list:
+    """``[(coefficient, mean square, df, level)]`` whose sum of coefficient x mean square
+    is the unbiased variance of the statistic in the crossed model ``W[s, r] = m + a_s +
+    b_r + e_sr`` of each block (seeds and recordings random): per test set the variance of
+    its recording means over R; per seed key the variance of its seed totals over S, less
+    the interaction's share of it (a seed key whose seed component comes out negative is
+    taken as 0: its terms are dropped). ``levels='seeds'``: the recordings fixed, the
+    seed totals' variance over S only."""
+    terms, by_group, by_key = [], {}, {}
+    for (k, grp), W in blocks.items():
+        by_group.setdefault(grp, []).append(W)
+        by_key.setdefault(k, []).append(W)
+    if levels == "both":
+        for Ws in by_group.values():
+            R = Ws[0].shape[1]
+            terms.append((1.0 / R, float(np.var(sum(W.mean(0) for W in Ws), ddof=1)),
+                          R - 1, "recording"))
+    for Ws in by_key.values():
+        S = Ws[0].shape[0]
+        seed = [(1.0 / S, float(np.var(sum(W.mean(1) for W in Ws), ddof=1)), S - 1, "seed")]
+        for W in Ws if levels == "both" else []:
+            R = W.shape[1]
+            seed.append((-1.0 / (R * S), _interaction(W), (S - 1) * (R - 1), "interaction"))
+        if levels == "seeds" or sum(c * m for c, m, _, _ in seed) > 0:
+            terms += seed
+    return terms
+
+
+def _interaction(W: np.ndarray) -> float:
+    """The seed x recording mean square of one block (two-way ANOVA, one value a cell)."""
+    e = W - W.mean(1, keepdims=True) - W.mean(0, keepdims=True) + W.mean()
+    return float((e ** 2).sum()) / ((W.shape[0] - 1) * (W.shape[1] - 1))
+
+
+def _components(blocks: dict) -> dict:
+    """The statistic's variance components at one seed and one recording: ``seed``,
+    ``recording``, ``interaction`` (each unbiased, negative ones taken as 0), so that its
+    variance at S seeds and R recordings is about ``seed / S + recording / R +
+    interaction / (S R)`` (the power analysis's input), with the sizes they came from
+    (the smallest row's; other rows' components are scaled to them)."""
+    S = min(W.shape[0] for W in blocks.values())
+    R = min(W.shape[1] for W in blocks.values())
+    by_group, by_key = {}, {}
+    for (k, grp), W in blocks.items():
+        by_group.setdefault(grp, []).append(W)
+        by_key.setdefault(k, []).append(W)
+    inter = sum(_interaction(W) * S * R / W.size for W in blocks.values())
+    rec = sum(max(0.0, float(np.var(sum(W.mean(0) for W in Ws), ddof=1))
+                  - sum(_interaction(W) / W.shape[0] for W in Ws)) * R / Ws[0].shape[1]
+              for Ws in by_group.values())
+    seed = sum(max(0.0, float(np.var(sum(W.mean(1) for W in Ws), ddof=1))
+                   - sum(_interaction(W) / W.shape[1] for W in Ws)) * S / Ws[0].shape[0]
+               for Ws in by_key.values())
+    return {"seed": seed, "recording": rec, "interaction": inter, "seeds": S,
+            "recordings": R}
+
+
+def satterthwaite(terms) -> tuple:
+    """``(variance, df)`` of a linear combination of mean squares, ``terms`` ``[(c, ms,
+    df, ...)]``: Satterthwaite's (1946) degrees of freedom ``V^2 / sum((c ms)^2 / df)``."""
+    var = sum(t[0] * t[1] for t in terms)
+    den = sum((t[0] * t[1]) ** 2 / t[2] for t in terms if t[2] > 0)
+    return float(var), (float(var ** 2 / den) if den > 0 else float("inf"))
+
+
+def bounded_interval(value: float, se: float, df: float, support=None, n: int = 0,
+                     confidence: float = CONFIDENCE) -> tuple:
+    """``(low, high)`` of a t interval (``df``) that respects the statistic's range
+    ``support`` without clipping: ``(0, 1)``: the Clopper-Pearson interval at the
+    effective sample size ``value (1 - value) / se^2`` scaled by ``(z / t_df)^2`` (Korn &
+    Graubard 1998), which at a value of 0 or 1 with ``se`` 0 takes the ``n`` counted units
+    (e.g. 19 of 19 perfect recordings: [0.823, 1]); ``(0, inf)``: the t interval of the
+    log (a ratio scale); otherwise (None) the symmetric t interval."""
+    from .._extras import require
+
+    st = require("scipy.stats", "seed and recording intervals")
+    a = (1 - confidence) / 2
+    q = float(st.t.ppf(1 - a, df)) if np.isfinite(df) else float(st.norm.ppf(1 - a))
+    lo_s, hi_s = support if support is not None else (-np.inf, np.inf)
+    if (lo_s, hi_s) == (0.0, 1.0) and 0 <= value <= 1:
+        if se > 0 and 0 < value < 1:
+            n_eff = value * (1 - value) / se ** 2 * (float(st.norm.ppf(1 - a)) / q) ** 2
+        else:
+            n_eff = float(n)
+        if n_eff <= 0:
+            return float("nan"), float("nan")
+        x = value * n_eff
+        low = 0.0 if x <= 0 else float(st.beta.ppf(a, x, n_eff - x + 1))
+        high = 1.0 if x >= n_eff else float(st.beta.ppf(1 - a, x + 1, n_eff - x))
+        return low, high
+    if (lo_s, hi_s) == (0.0, np.inf) and value > 0:
+        f = float(np.exp(q * se / value))
+        return value / f, value * f
+    return value - q * se, value + q * se
+
+
+def variance_components(rows, fn=lambda v: v[0], *, groups=None, seed_keys=None,
+                        confidence: float = CONFIDENCE, levels: str = "both",
+                        support=None) -> Test:
+    """The value, interval and t test of ``fn(row values)`` from the rows' seed,
+    recording and seed x recording variance components (arguments as :func:`two_level`;
+    no resampling). Each row is linearised (:func:`pseudo_values`), the statistic too (its
+    derivative in each row); rows of one ``seed_keys`` key are paired on their seeds (the
+    same runs, or runs that share seed numbers), rows of one ``groups`` key on their
+    recordings; the variance is :func:`_terms`'s, the df :func:`satterthwaite`'s, the
+    interval :func:`bounded_interval`'s. NaN bounds and p with fewer than two recordings
+    or a row of fewer than two seeds; p NaN (:data:`ZERO_SE`) when the variance is 0."""
+    parts, groups, keys = _setup(rows, groups, seed_keys)
+    full = [_mean(p.values(np.ones((1, p.shape[1]))), 1)[0] for p in parts]
+    value = float(fn(full))
+    R = min(p.shape[1] for p in parts)
+    undefined = Test(value, float("nan"), float("nan"), R, df=float("nan"))
+    grad = _gradient(fn, full)
+    used = [p for p, w in zip(parts, grad) if w != 0]
+    if R < 2 or not np.isfinite(value) or any(p.shape[0] < 2 for p in used):
+        return undefined
+    with np.errstate(invalid="ignore"):
+        blocks = _blocks(parts, groups, keys, grad)
+    if not blocks:  # fn does not depend on the rows: a constant
+        return Test(value, value, value, R, float("nan"), 0.0, float("nan"))
+    terms = _terms(blocks, levels)
+    if not np.all(np.isfinite([t[1] for t in terms])):
+        return undefined
+    var, df = satterthwaite(terms)
+    se = float(np.sqrt(max(var, 0.0)))
+    comps = _components(blocks) if levels == "both" else None
+    low, high = bounded_interval(value, se, df, support, R, confidence)
+    if se <= 1e-9 * max([1.0] + [abs(x) for x in full if np.isfinite(x)]):  # rounding
+        low, high = bounded_interval(value, 0.0, df, support, R, confidence)
+        return Test(value, low, high, R, float("nan"), 0.0, df, comps)
+    from .._extras import require
+
+    p = float(2 * require("scipy.stats", "seed and recording intervals").t.sf(
+        abs(value) / se, df))
+    return Test(value, low, high, R, p, se, df, comps)
 
 
 def row_values(num, den) -> np.ndarray:

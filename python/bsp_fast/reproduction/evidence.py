@@ -1,17 +1,21 @@
 """A table trained with several seeds, as evidence (docs/reproduce.md, "Seeds, intervals and
 marks"): each cell the mean ± std over seeds and a 95 % interval over seeds *and* test
-recordings, each of the report's findings marked from the same two-level bootstrap
-(:mod:`bsp_fast.metrics.hierarchical`, t method), Holm-Bonferroni over the table's family
-of comparisons, with the probability of improvement beside each comparison of two rows.
+recordings, each of the report's findings marked from the same seed, recording and
+interaction variance components (:func:`bsp_fast.metrics.hierarchical.variance_components`,
+Satterthwaite's degrees of freedom; a cell's interval respects its metric's range),
+Holm-Bonferroni over the table's family of comparisons, with the probability of
+improvement beside each comparison of two rows.
 
 The data: per row, per seed, per test recording the sums behind each metric (``num``,
 ``den``: ``test_per_recording.json``), or for a per-clip metric (:data:`CLIP_METRICS`) each
 recording's clips. Rows scored on one dataset are aligned on the union of their
 recordings (a seed that did not test a recording adds nothing there), so the recordings
 are drawn once per replicate for all of them (paired); rows of different datasets
-(``data_suffix``) share no recordings and are drawn independently. A row's seeds are drawn
-within the row; a row and its trivial baseline (or a row read from another row's trivial
-baseline, ``initial_of``) are the same runs and share the draw.
+(``data_suffix``) share no recordings and are independent. Rows trained with the same seed
+numbers (in the same order) are paired on their seeds: a row and its trivial baseline
+(or a row read from another row's trivial baseline, ``initial_of``) are the same runs, and
+rows of one table that share seed numbers share their data order (pairing is valid whether
+or not their seed effects correlate; it costs degrees of freedom when they do not).
 """
 from __future__ import annotations
 
@@ -30,8 +34,12 @@ __all__ = ["summarise", "evaluate_findings", "statistics", "rerun_difference",
            "DEFAULT_MARGIN", "METHOD", "CLIP_METRICS"]
 
 #: the interval and test of cells and findings: the method whose coverage was measured
-#: within 93-97 % at the tables' sizes (docs/reproduce.md)
-METHOD = "t"
+#: at the tables' sizes (experiments/coverage_study.py, docs/reproduce.md)
+METHOD = "vc"
+#: a seed of a classifier "collapsed" when at least this share of its test clips get one
+#: predicted class; a row with some but not all seeds collapsed has seeds in two modes and
+#: its comparisons are inconclusive by rule (no interval over a few seeds describes them)
+COLLAPSED_SHARE = 0.95
 #: a finding's ``equivalence_margin`` when it states none: this share of the report's size
 DEFAULT_MARGIN = 0.5
 #: per-clip metrics (not ratios of per-recording sums) and their functions in
@@ -42,10 +50,16 @@ CLIP_METRICS = {"auroc": "auroc", "ap": "average_precision"}
 
 def statistics(res: dict | None = None) -> dict:
     """What the cells' intervals and the marks are (saved in ``results.json``)."""
-    return {"interval": f"two-level bootstrap, {METHOD} method: seeds resampled within each "
-                        "row, test recordings jointly for the rows of one dataset",
-            "confidence": U.CONFIDENCE, "resamples": U.N_RESAMPLES,
+    return {"interval": "seed, recording and seed x recording variance components of the "
+                        "linearised per-seed, per-recording sums, Satterthwaite df, rows "
+                        "paired on the recordings of one dataset and on shared seed "
+                        "numbers; a cell's interval respects its metric's range (fractions: "
+                        "Clopper-Pearson at the effective sample size, mm: on the log)",
+            "confidence": U.CONFIDENCE, "method": METHOD,
             "interval_seeds": "the same over seeds only, the test recordings fixed",
+            "rules": f"inconclusive: {H.ZERO_SE}; seeds in two modes (a classifier seed "
+                     f"with one predicted class on >= {COLLAPSED_SHARE:.0%} of its test "
+                     "clips beside seeds without)",
             "family": "Holm-Bonferroni over every comparison of this table file's "
                       "confirmatory findings at this budget"
                       + (f" ({res['budget']})" if res else "")
@@ -72,6 +86,27 @@ class _Sums:
     def runs_of(self, row: str) -> str:
         """The row whose runs ``row``'s values come from (itself, or its ``initial_of``)."""
         return self.res["results"][row].get("run_of") or row
+
+    def seed_key(self, row: str) -> tuple:
+        """The key rows are paired on their seeds by: the seed numbers, in order."""
+        return tuple(self.res["results"][self.runs_of(row)]["seeds"])
+
+    def collapsed(self, row: str, initial: bool) -> list:
+        """The seeds of ``row`` (their numbers) that predict one class on at least
+        :data:`COLLAPSED_SHARE` of their test clips (score >= 0.5 positive); [] without
+        clips."""
+        r = self.res["results"][row]
+        section = "initial" if (initial or r.get("source") == "initial") else "test"
+        out = []
+        for name, s in r["seeds"].items():
+            part = (self._doc(s["per_recording"]).get(section) or {}) \
+                if s.get("per_recording") else {}
+            clips = [c for rec in part.get("clips") or [] for c in rec]
+            if clips:
+                positive = float(np.mean([c[0] >= 0.5 for c in clips]))
+                if max(positive, 1 - positive) >= COLLAPSED_SHARE:
+                    out.append(name)
+        return out
 
     def seeds(self, row: str, metric: str, initial: bool):
         """``([(recordings, data), ...] one per seed, empty)``: ``data`` ``(num, den)``
@@ -161,14 +196,14 @@ def _load(sums: _Sums, tab, parts: list):
     union = {g: sorted({r for x, gx in zip(loaded, groups) if gx == g for recs, _ in x[0]
                         for r in recs}) for g in dict.fromkeys(groups)}
     rows = [_row(x[0], union[g], x[1], part[1]) for x, g, part in zip(loaded, groups, parts)]
-    return {"rows": rows, "groups": groups, "keys": [sums.runs_of(r) for r, _, _ in parts],
+    return {"rows": rows, "groups": groups, "keys": [sums.seed_key(r) for r, _, _ in parts],
             "seeds": {row: len(x[0]) for (row, _, _), x in zip(parts, loaded)},
             "recordings": min(len(u) for u in union.values())}
 
 
-def _test(data: dict, fn, levels: str = "both") -> H.Test:
+def _test(data: dict, fn, levels: str = "both", support=None) -> H.Test:
     return H.two_level(data["rows"], fn, groups=data["groups"], seed_keys=data["keys"],
-                       method=METHOD, levels=levels)
+                       method=METHOD, levels=levels, support=support)
 
 
 def _values(r: dict, metric: str) -> list:
@@ -181,16 +216,14 @@ def _bounds(iv) -> list | None:
         else None
 
 
-def _in_support(metric: str, bounds: list) -> list:
-    """A cell's interval cut to the values its metric can take (fractions in [0, 1],
-    errors in mm at least 0): the symmetric t interval of a mean near a bound reaches past
-    it (F1 0.95 [0.86, 1.04]); cutting changes no mark, which are decided on differences."""
+def support(metric: str):
+    """The values ``metric`` can take, for its cells' intervals: ``(0, 1)`` for fractions,
+    ``(0, inf)`` for errors in mm, None (unbounded) otherwise."""
     from ..training.scoring import UNITS
 
     unit = UNITS.get(metric, "")
-    lo, hi = {"fraction": (0.0, 1.0)}.get(unit, (0.0, math.inf) if unit.startswith("mm")
-                                           else (-math.inf, math.inf))
-    return [min(max(bounds[0], lo), hi), min(max(bounds[1], lo), hi)]
+    return (0.0, 1.0) if unit == "fraction" else (0.0, math.inf) if unit.startswith("mm") \
+        else None
 
 
 def summarise(tab: dict, res: dict) -> dict:
@@ -198,8 +231,8 @@ def summarise(tab: dict, res: dict) -> dict:
     ``metrics`` and ``initial`` (means over seeds), ``std`` (sample std over seeds, None
     for one seed), ``interval`` (``[low, high]``: the 95 % two-level interval of the mean
     over seeds, seeds and test recordings resampled) and ``interval_seeds`` (over seeds
-    only, the recordings fixed) per metric of the table; absent where undefined (one seed,
-    no per-recording data). Adds ``res["statistics"]`` (:func:`statistics`). Returns ``res``."""
+    only, the recordings fixed) per metric of the table, inside the values the metric can
+    take (:func:`support`); absent where undefined (one seed, no per-recording data). Adds ``res["statistics"]`` (:func:`statistics`). Returns ``res``."""
     sums = _Sums(res)
     for name, r in res["results"].items():
         r["metrics"], r["std"], r["initial"] = {}, {}, {}
@@ -210,9 +243,9 @@ def summarise(tab: dict, res: dict) -> dict:
             r["std"][m] = float(np.std(vals, ddof=1)) if len(vals) > 1 else None
             data = _load(sums, tab, [(name, m, False)])
             for key, levels in (("interval", "both"), ("interval_seeds", "seeds")):
-                b = _bounds(_test(data, lambda v: v[0], levels) if data else None)
+                b = _bounds(_test(data, lambda v: v[0], levels, support(m)) if data else None)
                 if b is not None:
-                    r[key][m] = _in_support(m, b)
+                    r[key][m] = b
             init = [s["initial"].get(m) for s in r["seeds"].values()
                     if s["initial"].get(m) is not None]
             r["initial"][m] = float(np.mean(init)) if init else None
@@ -300,10 +333,32 @@ def _compute(tab, f, sums: _Sums, have) -> dict:
                 seed_keys=[data["keys"][i], data["keys"][j]])
         # the rules bind each comparison by its own rows: an ordering with one under-seeded
         # row is still not reproduced when a comparison of other rows goes against it
-        out.append({"label": label, "side": side, "test": _test(data, fn),
+        test = _test(data, fn)
+        why = [U.rule(data["seeds"], data["recordings"]), _modes(sums, parts),
+               H.ZERO_SE if test.se == 0 else None]
+        out.append({"label": label, "side": side, "test": test,
                     "seeds_only": _test(data, fn, "seeds"), "poi": poi,
-                    "rule": U.rule(data["seeds"], data["recordings"])})
-    return {"pieces": out, "rule": U.rule(seeds, min(recordings)), "seeds": seeds}
+                    "rule": "; ".join(w for w in why if w) or None})
+    extra = [w for q in out for w in (q["rule"] or "").split("; ")
+             if w and not w.startswith("fewer than")]
+    rule = "; ".join(dict.fromkeys([w for w in [U.rule(seeds, min(recordings))] if w]
+                                   + extra)) or None
+    return {"pieces": out, "rule": rule, "seeds": seeds}
+
+
+def _modes(sums: _Sums, parts: list) -> str | None:
+    """The rule for rows whose seeds split into modes (:data:`COLLAPSED_SHARE`): some
+    but not all of a row's seeds predict one class, or None."""
+    split = {}
+    for row, _, initial in parts:
+        got = sums.collapsed(row, initial)
+        if got and len(got) < len(sums.res["results"][row]["seeds"]):
+            split[row] = got
+    if not split:
+        return None
+    return ("seeds in two modes (one predicted class on >= "
+            f"{COLLAPSED_SHARE:.0%} of test clips: "
+            + ", ".join(f"{r} {'/'.join(s)}" for r, s in split.items()) + ")")
 
 
 def _num(tab, m, v) -> str:
