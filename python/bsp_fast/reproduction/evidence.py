@@ -289,7 +289,7 @@ def _pieces(tab, f) -> list:
     elif k == "fails":
         base = "f1_constant" if f.get("baseline") == "constant" else m
         margin = f.get("margin", 0.0)
-        out.append((f"{f['row']} − (trivial {margin:+g})",
+        out.append((f"{f['row']} − ({_baseline_name(tab, f)} {margin:+g})",
                     [(f["row"], m, False), (f["row"], base, True)],
                     lambda v: sign * (v[0] - v[1]) - margin, -1, (0, 1)))
     else:  # beats_initial
@@ -297,6 +297,17 @@ def _pieces(tab, f) -> list:
             out.append((f"{r} − trivial", [(r, m, False), (r, m, True)],
                         lambda v: v[0] - v[1], sign, (0, 1)))
     return out
+
+
+def _baseline_name(tab: dict, f: dict) -> str:
+    """The name of the answer a ``fails`` finding compares with: the always-crossing
+    constant (``baseline: constant``, not the table's trivial column) or the trivial
+    baseline the table's column shows."""
+    from ..training.tasks import get_task
+
+    if f.get("baseline") == "constant":
+        return "always-crossing answer"
+    return f"trivial baseline ({get_task(tab['task']).baseline})"
 
 
 def _margin(tab: dict, f: dict) -> float:
@@ -336,7 +347,9 @@ def _compute(tab, f, sums: _Sums, have) -> dict:
         test = _test(data, fn)
         why = [U.rule(data["seeds"], data["recordings"]), _modes(sums, parts),
                H.ZERO_SE if test.se == 0 else None]
-        out.append({"label": label, "side": side, "test": test,
+        out.append({"label": label, "side": side, "test": test, "values": [
+                        float(np.nanmean(p.values(np.ones((1, p.shape[1])))[0]))
+                        for p in data["rows"]],
                     "seeds_only": _test(data, fn, "seeds"), "poi": poi,
                     "rule": "; ".join(w for w in why if w) or None})
     extra = [w for q in out for w in (q["rule"] or "").split("; ")
@@ -401,6 +414,8 @@ def _finding(tab, f, c: dict) -> dict:
                                       "(interval not inside)",
                       None: f"size not judged against the report's {size} (by rule)"}[verdict])
         out["size"] = {"report": f["report"], "equivalence_margin": margin, "verdict": verdict}
+    if f["kind"] == "fails":  # the baseline's value, which the table's columns may not show
+        texts.append(f"{_baseline_name(tab, f)}: {_num(tab, m, pieces[0]['values'][1])}")
     out["ours"] = "; ".join(texts)
     return out
 

@@ -270,9 +270,11 @@ def protocol_lines(tab: dict, res: dict) -> list:
             out.append("Options given over the table file's (`--set`, option flags): "
                        f"`{json.dumps(p['options'], sort_keys=True)}`.")
         if p.get("mixed"):
+            earlier = _earlier(p["mixed"])
+            none = " ('none': not recorded)" if any(not m.get("hash") for m in
+                                                    p["mixed"].values()) else ""
             out.append(f"**Mixed protocols (--allow-changed):** {len(p['mixed'])} run(s) "
-                       f"were made under {_earlier(p['mixed'])} ('none': not recorded): "
-                       f"{', '.join(p['mixed'])}.")
+                       f"were made under {earlier}{none}: {', '.join(p['mixed'])}.")
         if p.get("restored"):
             froms = sorted({(p.get("runs", {}).get(n) or {}).get("restored_from", "?")
                             for n in p["restored"]})

@@ -312,14 +312,16 @@ def wanted_rows(tab: dict, rows=None) -> list:
 def table_header(tab: dict, epochs_label: str) -> tuple:
     """``(header, metrics, reported, settings)`` of a results table: row, model, the
     deformation settings (2D-input tasks), our metrics, the report's, the trivial
-    baseline's first metric and ``epochs_label``."""
+    baseline's first metric (named: classification's is the majority class, never
+    crossing) and ``epochs_label``."""
     metrics = list(tab["metrics"])
     reported = [m for m in metrics if any(m in (r.get("report") or {}) for r in tab["rows"])]
     settings = get_task(tab["task"]).deformed_inputs
     header = ["row", "model"] + (["σ (px)", "MJP"] if settings else [])
     header += [tab["metrics"][m]["label"] for m in metrics]
     header += [f"report {tab['metrics'][m]['label']}" for m in reported]
-    header += [f"trivial {tab['metrics'][metrics[0]]['label']}", epochs_label]
+    header += [f"trivial {tab['metrics'][metrics[0]]['label']} "
+               f"({get_task(tab['task']).baseline})", epochs_label]
     return header, metrics, reported, settings
 
 
