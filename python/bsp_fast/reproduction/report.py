@@ -77,12 +77,15 @@ def marks_note(findings: list, budget: str) -> str:
                    if bool(f.get("exploratory")) == exploratory for p in f.get("p_holm") or [])
 
     extra = count(True)
-    return ("Marks: decided when the Holm-adjusted p of the two-level t test is below 0.05; "
+    return ("Marks: decided when the Holm-adjusted p of the t test on the seed, recording "
+            "and interaction variance components (Satterthwaite df) is below 0.05; "
             f"Holm's family: this table file's {count(False)} confirmatory comparisons at "
             f"budget {budget}" + (f" (the {extra} exploratory ones: a family of their own)"
                                   if extra else "")
             + f"; inconclusive by rule with fewer than {MIN_SEEDS} seeds in a row or "
-            f"{MIN_RECORDINGS} test recordings. "
+            f"{MIN_RECORDINGS} test recordings, with a standard error of 0, or with a "
+            "row's seeds in two modes (some, not all, predicting one class on >= 95 % of "
+            "test clips). "
             "P(a beats b): the share of (seed of a, seed of b) pairs where a's value is "
             "better, on the test recordings.")
 
@@ -171,7 +174,8 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
     text = [f"### {tab['title']} — budget {res['budget']}, {len(res['seeds'])} seeds "
             f"(split {split})", "", *banner,
             "Cells: mean ± std over seeds [95 % interval of the mean over seeds and test "
-            "recordings: two-level bootstrap, t method]. "
+            "recordings: seed, recording and interaction variance components, "
+            "Satterthwaite df, inside the metric's range]. "
             f"Rule: {tab.get('budget_rule', '').strip()}", "", _md(header, rows), "",
             _md(["finding (report)", "ours: difference [95 % interval, seeds and recordings] "
                  "(seeds only)", "P(a beats b)", "report", "status (Holm-adjusted p)"],
