@@ -41,8 +41,12 @@ __all__ = ["HASHED", "LEDGER", "DEVIATION_KEYS", "ProtocolChanged", "table_hash"
            "protocol_lines", "code_text"]
 
 #: what :func:`table_hash` hashes, in words (recorded beside the hash)
-HASHED = ("sha256 of the table file's parsed YAML without its deviations list, as "
-          "canonical JSON (sorted keys)")
+HASHED = ("sha256 of the table file's parsed YAML without its deviations list (and power "
+          "block), as canonical JSON (sorted keys)")
+#: top-level keys of a table file outside its hash: records about the protocol (its
+#: deviations; ``power``, the sizes a finding needs, experiments/power_analysis.py), which
+#: change no run
+UNHASHED = ("deviations", "power")
 LEDGER = "protocol.json"
 #: command-line options that change how a run executes, not what it computes
 EXECUTION_KEYS = ("workers", "threads")
@@ -59,9 +63,9 @@ class ProtocolChanged(ValueError):
 
 # ---------------------------------------------------------------------- hash and code
 def canonical(doc: dict) -> str:
-    """The canonical JSON of a parsed table file, without ``deviations`` (dates, which
+    """The canonical JSON of a parsed table file, without :data:`UNHASHED` (dates, which
     YAML parses, as ISO strings)."""
-    body = {k: v for k, v in doc.items() if k != "deviations"}
+    body = {k: v for k, v in doc.items() if k not in UNHASHED}
     return json.dumps(body, sort_keys=True, ensure_ascii=False, separators=(",", ":"),
                       default=str)
 
