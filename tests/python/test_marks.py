@@ -454,3 +454,23 @@ def test_a_row_whose_seeds_trained_in_different_precisions_is_named(tmp_path):
     for v in res["results"]["lstm"]["seeds"].values():
         v["precision"] = "bf16-mixed"
     assert "Precision:" not in R.format_table(tab, res, E.evaluate_findings(tab, res))
+
+
+def test_labels_add_up():
+    """#56, item 4: 'not recorded' only where a mixed run has no hash; a fails finding
+    names the answer it compares with, which is not the table's trivial column."""
+    from bsp_fast.reproduction.protocol import protocol_lines
+    from bsp_fast.reproduction.table_files import table_header
+
+    prot = {"table_file": "x.yaml", "hash": "a" * 64, "hashed": "h", "utc": "now",
+            "code": {"commit": "b" * 40}, "mixed": {"r/seed-1": {"hash": "c" * 64,
+                                                                "options": {}}}}
+    line = [x for x in protocol_lines({}, {"protocol": prot}) if "Mixed" in x][0]
+    assert "cccccccccccc" in line and "not recorded" not in line
+    prot["mixed"]["r/seed-2"] = {"hash": None, "options": {}}
+    line = [x for x in protocol_lines({}, {"protocol": prot}) if "Mixed" in x][0]
+    assert "cccccccccccc, none (" in line and "('none': not recorded)" in line
+    tab = R.load_table("classification")
+    assert "trivial F1 (majority class)" in table_header(tab, "epochs")[0]
+    fails = next(f for f in tab["findings"] if f["kind"] == "fails")
+    assert E._pieces(tab, fails)[0][0].endswith("(always-crossing answer +0.05)")
