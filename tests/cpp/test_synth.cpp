@@ -2,6 +2,7 @@
 // animation import (bsp/synth/motion.hpp) of a tiny BVH written here, read via assimp.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -209,6 +210,68 @@ TEST_CASE("bodies: tag 4 in front of the background, hidden behind nearer geomet
     CHECK(tags[2 * n + px] == bg.tags[px]);
     if (tags[n + px] != 4) CHECK(tags[n + px] == bg.tags[px]);
   }
+}
+
+// A street-like scene: ground bands, a parked "car" and a pole in front of a wall, a tree.
+Scene cluttered() {
+  Scene sc = ground_only();
+  Box car, wall;
+  car.lo = Vec3(5, -3, 0.3), car.hi = Vec3(5.6, -0.5, 1.4), car.tag = 10;
+  wall.lo = Vec3(14, -20, 0), wall.hi = Vec3(15, 20, 6), wall.tag = 1;
+  sc.boxes = {car, wall};
+  Cylinder pole;
+  pole.s = 4, pole.w = 0.8, pole.z0 = 0, pole.z1 = 3, pole.radius = 0.12, pole.tag = 5;
+  sc.cylinders = {pole};
+  Sphere crown;
+  crown.centre = Vec3(7, 2.5, 2.2), crown.radius = 1.0, crown.tag = 9;
+  sc.spheres = {crown};
+  return sc;
+}
+
+TEST_CASE("body_visibility: render_bodies' flags without the images") {
+  const Scene sc = cluttered();
+  Camera cam = level_camera();
+  cam.k = Intrinsics{160, 96, 90.0};
+  const Images bg = background(sc, cam, 1);
+  // A walker crossing the view at three depths (behind the car, the pole and the crown
+  // for some frames), a far one thinner than a pixel, one behind the camera, one at the
+  // image edge.
+  std::vector<Capsule> caps;
+  std::size_t frames = 0;
+  for (double x : {6.5, 8.0, 60.0}) {
+    for (int k = 0; k <= 24; ++k, ++frames) {
+      const double y = -4.0 + k / 3.0, r = x > 50 ? 0.004 : 0.25;
+      caps.push_back({Vec3(x, y, 0.3), Vec3(x, y, 1.7), r, Vec3(200, 0, 0)});
+      caps.push_back({Vec3(x, y, 1.75), Vec3(x, y, 1.75), r * 0.6, Vec3(200, 0, 0)});
+    }
+  }
+  caps.push_back({Vec3(-3, 0, 0.3), Vec3(-3, 0, 1.5), 0.3, Vec3()});
+  caps.push_back({Vec3(-3, 0, 1.6), Vec3(-3, 0, 1.6), 0.2, Vec3()});
+  caps.push_back({Vec3(3, -3.4, 0.3), Vec3(3, -3.4, 1.5), 0.3, Vec3()});
+  caps.push_back({Vec3(3, -3.4, 1.6), Vec3(3, -3.4, 1.6), 0.2, Vec3()});
+  frames += 2;
+  const std::size_t n = 160 * 96;
+  std::vector<std::uint8_t> rgb(3 * n * frames), tags(n * frames), drawn(frames);
+  render_bodies(cam, sc.light, bg.rgb.data(), bg.tags.data(), bg.depth.data(), caps.data(), 2,
+                frames, rgb.data(), tags.data(), drawn.data(), 1);
+  for (int threads : {1, 3}) {
+    std::vector<std::uint8_t> vis(frames, 7);
+    body_visibility(sc, cam, caps.data(), 2, frames, vis.data(), threads);
+    CHECK(vis == drawn);
+  }
+  // Both values occur: the comparison could not pass with a constant.
+  const auto shown = std::count(drawn.begin(), drawn.end(), 1);
+  CHECK(shown > 10);
+  CHECK(shown + 5 < static_cast<long>(frames));
+  // StreetView::depth is the background pass's depth, bit for bit, at every pixel.
+  const StreetView view(sc, cam);
+  int differ = 0;
+  for (int i = 0; i < 96; ++i)
+    for (int j = 0; j < 160; ++j) {
+      const float d = view.depth(i, j), want = bg.depth[static_cast<std::size_t>(i) * 160 + j];
+      differ += !(d == want || (std::isinf(d) && std::isinf(want)));
+    }
+  CHECK(differ == 0);
 }
 
 TEST_CASE("motion: BVH nodes, rest pose and sampled local transforms") {

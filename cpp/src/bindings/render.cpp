@@ -129,6 +129,31 @@ py::tuple render_bodies(const CArray<std::uint8_t>& bg_rgb, const CArray<std::ui
   return py::make_tuple(rgb, tags, visible);
 }
 
+py::array_t<bool> body_visibility(const CArray<double>& road, const CArray<double>& bands,
+                                  const CArray<double>& boxes, const CArray<double>& cyls,
+                                  const CArray<double>& spheres, const CArray<double>& light,
+                                  const CArray<double>& camera, int width, int height,
+                                  double fov, const CArray<double>& capsules, int threads) {
+  const rd::Scene sc = make_scene(road, bands, boxes, cyls, spheres, light);
+  const rd::Camera cam = make_camera(camera, width, height, fov);
+  if (capsules.ndim() != 3 || capsules.shape(2) != 7)
+    throw py::value_error("capsules: expected shape (frames, P, 7), got " + shape_str(capsules));
+  const auto frames = capsules.shape(0), P = capsules.shape(1);
+  std::vector<rd::Capsule> caps(static_cast<std::size_t>(frames * P));
+  for (std::size_t k = 0; k < caps.size(); ++k) {
+    const double* c = capsules.data() + 7 * k;
+    caps[k] = rd::Capsule{v3(c), v3(c + 3), c[6], Vec3::Zero()};  // colour: not drawn
+  }
+  auto visible = empty<bool>({frames});
+  {
+    py::gil_scoped_release nogil;
+    rd::body_visibility(sc, cam, caps.data(), static_cast<std::size_t>(P),
+                        static_cast<std::size_t>(frames),
+                        reinterpret_cast<std::uint8_t*>(visible.mutable_data()), threads);
+  }
+  return visible;
+}
+
 }  // namespace
 }  // namespace bsp::py_bind
 
@@ -154,4 +179,12 @@ BSP_BINDING(render) {
         "tags (F,H,W) u8, visible (F,) bool).\ncapsules (F,P,7) world [ax,ay,az,bx,by,bz,"
         "radius]; colours (P,3) 0..255; tag 4 where a capsule is in front of the "
         "background depth.");
+  m.def("body_visibility", &body_visibility, py::arg("road"), py::arg("bands"),
+        py::arg("boxes"), py::arg("cylinders"), py::arg("spheres"), py::arg("light"),
+        py::arg("camera"), py::arg("width"), py::arg("height"), py::arg("fov"),
+        py::arg("capsules"), py::arg("threads") = 0,
+        "render_bodies' visible flags (F,) bool over render_background's images of the "
+        "scene, without rendering them: only the background pixels the capsules' rays hit "
+        "are cast. Arguments as render_background's, then capsules (F,P,7) as "
+        "render_bodies'.");
 }

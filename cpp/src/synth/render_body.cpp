@@ -13,11 +13,6 @@
 namespace bsp::render {
 namespace {
 
-struct PixelBox {
-  int i0 = 0, i1 = 0, j0 = 0, j1 = 0;  // rows [i0, i1), columns [j0, j1)
-  bool empty() const { return i0 >= i1 || j0 >= j1; }
-};
-
 // Range of a / x over x in [x0, x1] (0 < x0 <= x1) and a in [a0, a1].
 void ratio_range(double a0, double a1, double x0, double x1, double& lo, double& hi) {
   lo = a0 < 0 ? a0 / x0 : a0 / x1;
@@ -70,23 +65,18 @@ void shade_pixel(const Capsule& c, const Vec3& p, double dist, const Vec3& sun,
     rgb[k] = static_cast<std::uint8_t>(std::lround(std::clamp(col[k], 0.0, 255.0)));
 }
 
-// Casts the pixels covered by any capsule's bounds, testing only the capsules whose bounds
-// hold the pixel; returns whether any pedestrian pixel was drawn.
-bool draw_body(const Camera& cam, const Lighting& light, const Capsule* caps, std::size_t n,
-               const float* bg_depth, std::uint8_t* rgb, std::uint8_t* tags) {
-  const Mat3 rt = cam.pose.R.transpose();
-  std::vector<PixelBox> boxes(n);
-  PixelBox all{cam.height(), 0, cam.width(), 0};
-  for (std::size_t k = 0; k < n; ++k) {
-    boxes[k] = capsule_bounds(cam, rt, caps[k]);
-    if (boxes[k].empty()) continue;
-    all = PixelBox{std::min(all.i0, boxes[k].i0), std::max(all.i1, boxes[k].i1),
-                   std::min(all.j0, boxes[k].j0), std::max(all.j1, boxes[k].j1)};
-  }
-  const Vec3 sun = light.sun.normalized();
+// Calls visit(px, capsule, t, d, dc) for each pixel whose ray hits one of the n capsules
+// (t: distance to the nearest hit along the unit world ray d; dc: the pixel's unnormalised
+// camera-axes direction), testing only the capsules whose bounds hold the pixel, row by
+// row, until visit returns true. Returns whether it did. The drawing pass and the
+// visibility pass both walk the pixels through this, so they agree on every hit.
+template <class Visit>
+bool walk_body(const Camera& cam, const Capsule* caps, std::size_t n, Visit&& visit) {
+  std::vector<PixelBox> boxes;
+  PixelBox all;
+  body_bounds(cam, caps, n, boxes, all);
   const std::size_t W = static_cast<std::size_t>(cam.width());
   std::vector<std::size_t> row, cand;
-  bool any = false;
   for (int i = all.i0; i < all.i1; ++i) {
     row.clear();
     for (std::size_t k = 0; k < n; ++k)
@@ -100,17 +90,60 @@ bool draw_body(const Camera& cam, const Lighting& light, const Capsule* caps, st
       const Vec3 d = cam.pose.R * dc.normalized();
       std::size_t which = n;
       const double best = nearest(cam.pose.t, d, caps, cand, which);
+      if (which == n) continue;
       const std::size_t px = static_cast<std::size_t>(i) * W + static_cast<std::size_t>(j);
-      if (which == n || !(best / dc.norm() < bg_depth[px])) continue;  // camera-x depth test
-      shade_pixel(caps[which], cam.pose.t + best * d, best, sun, light, rgb + 3 * px);
-      tags[px] = 4;  // Pedestrian
-      any = true;
+      if (visit(px, which, best, d, dc)) return true;
     }
   }
+  return false;
+}
+
+// Draws the pedestrian's pixels that are nearer than the background; returns whether any
+// pedestrian pixel was drawn.
+bool draw_body(const Camera& cam, const Lighting& light, const Capsule* caps, std::size_t n,
+               const float* bg_depth, std::uint8_t* rgb, std::uint8_t* tags) {
+  const Vec3 sun = light.sun.normalized();
+  bool any = false;
+  walk_body(cam, caps, n, [&](std::size_t px, std::size_t which, double best, const Vec3& d,
+                              const Vec3& dc) {
+    if (!(best / dc.norm() < bg_depth[px])) return false;  // camera-x depth test
+    shade_pixel(caps[which], cam.pose.t + best * d, best, sun, light, rgb + 3 * px);
+    tags[px] = 4;  // Pedestrian
+    any = true;
+    return false;
+  });
   return any;
 }
 
+// Whether the pedestrian has a pixel nearer than the background: draw_body's answer, with
+// the background depth of only the pixels the body covers, each cast at most once per
+// clip (`cache`, NaN = not cast yet), and the walk stopped at the first visible pixel.
+bool body_visible(const StreetView& street, const Camera& cam, const Capsule* caps,
+                  std::size_t n, std::vector<float>& cache) {
+  const std::size_t W = static_cast<std::size_t>(cam.width());
+  return walk_body(cam, caps, n, [&](std::size_t px, std::size_t, double best, const Vec3&,
+                                     const Vec3& dc) {
+    float& depth = cache[px];
+    if (std::isnan(depth))
+      depth = street.depth(static_cast<int>(px / W), static_cast<int>(px % W));
+    return best / dc.norm() < depth;
+  });
+}
+
 }  // namespace
+
+void body_bounds(const Camera& cam, const Capsule* caps, std::size_t n,
+                 std::vector<PixelBox>& boxes, PixelBox& all) {
+  const Mat3 rt = cam.pose.R.transpose();
+  boxes.assign(n, PixelBox{});
+  all = PixelBox{cam.height(), 0, cam.width(), 0};
+  for (std::size_t k = 0; k < n; ++k) {
+    boxes[k] = capsule_bounds(cam, rt, caps[k]);
+    if (boxes[k].empty()) continue;
+    all = PixelBox{std::min(all.i0, boxes[k].i0), std::max(all.i1, boxes[k].i1),
+                   std::min(all.j0, boxes[k].j0), std::max(all.j1, boxes[k].j1)};
+  }
+}
 
 void render_bodies(const Camera& cam, const Lighting& light, const std::uint8_t* bg_rgb,
                    const std::uint8_t* bg_tags, const float* bg_depth, const Capsule* caps,
@@ -129,6 +162,24 @@ void render_bodies(const Camera& cam, const Lighting& light, const std::uint8_t*
       visible[f] = draw_body(cam, light, caps + f * caps_per_frame, caps_per_frame, bg_depth,
                              out_rgb, out_tags);
     }
+  }, threads);
+}
+
+}  // namespace bsp::render
+
+namespace bsp::render {
+
+void body_visibility(const Scene& scene, const Camera& cam, const Capsule* caps,
+                     std::size_t caps_per_frame, std::size_t frames, std::uint8_t* visible,
+                     int threads) {
+  const StreetView street(scene, cam);  // checks scene and camera
+  const std::size_t npx = static_cast<std::size_t>(cam.width()) * cam.height();
+  // One block of frames per thread, each with its own depth cache: a pixel cast twice
+  // (once per thread) gets the same depth, so the flags do not depend on the threads.
+  parallel_for(frames, 16, [&](std::size_t lo, std::size_t hi) {
+    std::vector<float> cache(npx, std::numeric_limits<float>::quiet_NaN());
+    for (std::size_t f = lo; f < hi; ++f)
+      visible[f] = body_visible(street, cam, caps + f * caps_per_frame, caps_per_frame, cache);
   }, threads);
 }
 

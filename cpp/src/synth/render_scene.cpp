@@ -14,15 +14,6 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kEps = 1e-6;
 
-struct Hit {
-  double t = kInf;
-  Vec3 normal = Vec3::UnitZ();
-  std::uint8_t tag = 0;
-  Vec3 rgb = Vec3::Zero();
-  double texture = 0;
-  Pattern pattern = Pattern::Plain;
-};
-
 double frac(double x) { return x - std::floor(x); }
 
 void hit_ground(const Scene& sc, const Vec3& o, const Vec3& d, Hit& hit) {
@@ -150,33 +141,53 @@ Scene cull_behind(const Scene& sc, const Vec3& origin, const Vec3& fwd) {
 
 }  // namespace
 
-void render_background(const Scene& full, const Camera& cam, std::uint8_t* rgb,
-                       std::uint8_t* tags, float* depth, int threads) {
+StreetView::StreetView(const Scene& full, const Camera& cam)
+    : cam_(cam), road_rt_(full.road.R.transpose()) {
   check_scene(full);
   check_camera(cam);
+  origin_ = road_rt_ * (cam.pose.t - full.road.t);
+  scene_ = cull_behind(full, origin_, road_rt_ * cam.pose.R.col(0));
+}
+
+// Out of line so that every caller runs the same machine code: the background pass and
+// body_visibility must agree on each pixel's depth to the bit (a compiler allowed to fuse
+// multiply-adds could otherwise fuse them differently in two inlined copies).
+[[gnu::noinline]] Hit StreetView::cast(int i, int j, Vec3& world_dir, Vec3& road_dir) const {
+  world_dir = cam_.pose.R * pixel_direction(cam_, i, j);
+  road_dir = road_rt_ * world_dir;
+  Hit h;
+  hit_ground(scene_, origin_, road_dir, h);
+  for (const auto& b : scene_.boxes) hit_box(b, origin_, road_dir, h);
+  for (const auto& c : scene_.cylinders) hit_cylinder(c, origin_, road_dir, h);
+  for (const auto& s : scene_.spheres) hit_sphere(s, origin_, road_dir, h);
+  return h;
+}
+
+float StreetView::depth(int i, int j) const {
+  Vec3 dw, d;
+  const Hit h = cast(i, j, dw, d);
+  return h.t < kInf ? static_cast<float>(h.t) : std::numeric_limits<float>::infinity();
+}
+
+void render_background(const Scene& full, const Camera& cam, std::uint8_t* rgb,
+                       std::uint8_t* tags, float* depth, int threads) {
+  const StreetView view(full, cam);
+  const Scene& sc = view.scene();
   const int W = cam.width(), H = cam.height();
-  const Mat3 road_rt = full.road.R.transpose();
-  const Vec3 origin = road_rt * (cam.pose.t - full.road.t);
-  const Scene sc = cull_behind(full, origin, road_rt * cam.pose.R.col(0));
-  const Vec3 sun = road_rt * sc.light.sun.normalized();
+  const Vec3 sun = view.road_rt() * sc.light.sun.normalized();
   parallel_for(static_cast<std::size_t>(H), 8, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t i = lo; i < hi; ++i) {
       for (int j = 0; j < W; ++j) {
         const std::size_t px = i * static_cast<std::size_t>(W) + static_cast<std::size_t>(j);
-        const Vec3 dw = cam.pose.R * pixel_direction(cam, static_cast<int>(i), j);
-        const Vec3 d = road_rt * dw;
-        Hit h;
-        hit_ground(sc, origin, d, h);
-        for (const auto& b : sc.boxes) hit_box(b, origin, d, h);
-        for (const auto& c : sc.cylinders) hit_cylinder(c, origin, d, h);
-        for (const auto& s : sc.spheres) hit_sphere(s, origin, d, h);
+        Vec3 dw, d;
+        const Hit h = view.cast(static_cast<int>(i), j, dw, d);
         if (!(h.t < kInf)) {
           store(sky_colour(sc.light, dw), rgb + 3 * px);
           tags[px] = 13;  // Sky
           depth[px] = std::numeric_limits<float>::infinity();
           continue;
         }
-        const Vec3 p = origin + h.t * d;
+        const Vec3 p = view.origin() + h.t * d;
         Vec3 c = apply_pattern(h, p);
         if (h.texture > 0)
           c *= 1.0 + h.texture * (0.6 * value_noise(p * 1.3) + 0.4 * value_noise(p * 5.1));

@@ -196,10 +196,7 @@ def _render_setup(cp: ClipPlan, cfg: SynthConfig, per_frame: dict, threads: int)
         tabs.road, tabs.bands, tabs.boxes, tabs.cylinders, tabs.spheres, tabs.light,
         np.asarray(cp.camera, float), cfg.width, cfg.height, cfg.camera_fov, threads)
     colours = body.sample_colours(cp.rng_look)
-    yaw = np.radians(cp.path.yaw)
-    forward = np.stack([np.cos(yaw), np.sin(yaw), np.zeros_like(yaw)], -1)
-    caps = body.body_capsules(per_frame["world"][..., :3], forward)
-    return tabs, bg, colours, caps
+    return tabs, bg, colours, _capsules(cp, per_frame)
 
 
 def render_clip(cp: ClipPlan, cfg: SynthConfig, per_frame: dict, clips_dir: str,
@@ -230,19 +227,24 @@ def render_clip(cp: ClipPlan, cfg: SynthConfig, per_frame: dict, clips_dir: str,
     return visible
 
 
-# Output bytes (frames x H x W x 4) per render_bodies call in the poses-only path: small
-# calls keep the buffers cache-warm and reused (one 1600x600 frame per call: 0.3 s for 900
-# frames against 0.9 s in calls of 30 frames).
-VIS_CHUNK_BYTES = 4 << 20
+def _capsules(cp: ClipPlan, per_frame: dict) -> np.ndarray:
+    """The pedestrian's capsules (F, P, 7), world frame, every frame of the clip."""
+    yaw = np.radians(cp.path.yaw)
+    forward = np.stack([np.cos(yaw), np.sin(yaw), np.zeros_like(yaw)], -1)
+    return body.body_capsules(per_frame["world"][..., :3], forward)
 
 
 def segmentation_visibility(cp: ClipPlan, cfg: SynthConfig, per_frame: dict,
                             threads: int = 1) -> np.ndarray:
     """visible[F] as :func:`render_clip` returns it on the annotated frames (the only ones
-    data.csv keeps; False elsewhere), without writing or encoding any media.
+    data.csv keeps; False elsewhere), without rendering, writing or encoding any image.
 
-    The same background and body passes run with the same inputs (each frame is drawn
-    independently of the others), so the flags are bit-for-bit those of the full mode."""
+    ``core.body_visibility`` casts the same pixel rays through the same code as the two
+    render passes, but only where a capsule is hit, with the street's depth of only those
+    pixels (each cast once per clip) and each frame stopped at its first pedestrian
+    pixel, so the flags are bit-for-bit those of the full mode (tests/python/
+    test_synth_reference.py compares data.csv with 4fba854's, which rendered whole
+    frames)."""
     from .._native import core
 
     F = per_frame["annotated"].shape[0]
@@ -250,14 +252,9 @@ def segmentation_visibility(cp: ClipPlan, cfg: SynthConfig, per_frame: dict,
     frames = np.flatnonzero(per_frame["annotated"])
     if len(frames) == 0:
         return visible
-    tabs, (bg_rgb, bg_tags, bg_depth), colours, caps = _render_setup(cp, cfg, per_frame,
-                                                                     threads)
-    step = max(1, VIS_CHUNK_BYTES // (4 * cfg.width * cfg.height))
-    cam = np.asarray(cp.camera, float)
-    for k in range(0, len(frames), step):
-        sel = frames[k:k + step]
-        _, _, vis = core.render_bodies(bg_rgb, bg_tags, bg_depth, cam, cfg.camera_fov,
-                                       tabs.light, np.ascontiguousarray(caps[sel]), colours,
-                                       threads)
-        visible[sel] = vis
+    tabs = build_scene(cp)
+    caps = np.ascontiguousarray(_capsules(cp, per_frame)[frames])
+    visible[frames] = core.body_visibility(
+        tabs.road, tabs.bands, tabs.boxes, tabs.cylinders, tabs.spheres, tabs.light,
+        np.asarray(cp.camera, float), cfg.width, cfg.height, cfg.camera_fov, caps, threads)
     return visible

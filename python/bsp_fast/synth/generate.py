@@ -128,9 +128,9 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
         writer did); default keeps one APNG frame per video frame.
     poses_only: write data.csv (byte-identical to a full run with the same options) and
         config.yaml (``poses_only: true``) but no MP4/APNG: the media paths stay in the
-        CSV, ``clips/`` is not created. The pedestrian is still ray-cast against the street
-        on the annotated frames to decide ``in_segmentation`` exactly; the video and
-        segmentation encoders, nearly all of the time, are skipped.
+        CSV, ``clips/`` is not created. ``in_segmentation`` is still decided exactly, by
+        casting only the pixel rays that hit the pedestrian on the annotated frames (and
+        the street behind those pixels, once per clip); no frame is rendered or encoded.
     bone_length_variation: v in [0, 0.5): each walker's bone offsets are scaled by a seeded
         factor in [1 - v, 1 + v] (its own random stream: every other draw is unchanged), so
         the reference skeletons of the (age, gender) profiles are no longer exact; the

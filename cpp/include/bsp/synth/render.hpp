@@ -119,4 +119,12 @@ void render_bodies(const Camera& cam, const Lighting& light, const std::uint8_t*
                    std::size_t caps_per_frame, std::size_t frames, std::uint8_t* rgb,
                    std::uint8_t* tags, std::uint8_t* visible, int threads = 0);
 
+// visible[f] exactly as render_bodies computes it over render_background's images of
+// `scene`, without drawing either: only the background pixels that some capsule's ray hits
+// are cast (once per call), and a frame stops at its first pedestrian pixel. For the
+// poses-only mode of bsp-synth, which needs the flag and no image.
+void body_visibility(const Scene& scene, const Camera& cam, const Capsule* caps,
+                     std::size_t caps_per_frame, std::size_t frames, std::uint8_t* visible,
+                     int threads = 0);
+
 }  // namespace bsp::render
