@@ -1,15 +1,18 @@
-"""The README's result tables, generated (issue #37, "tables that cannot drift").
+"""The results page's tables, generated (issue #37, "tables that cannot drift").
 
 ``bsp-reproduce TABLE ... --publish docs/results`` copies a finished table's results into
 ``docs/results/TABLE-BUDGET.json`` (:func:`publish`: what the rendering needs, the
 per-seed summaries, the findings, the protocol; the per-seed, per-recording sums go to the
 sibling ``TABLE-BUDGET.per_recording.json``, the full table to ``TABLE-BUDGET.md``).
-``python3 -m bsp_fast.reproduction.readme`` rewrites every section of the README between
+``python3 -m bsp_fast.reproduction.readme`` rewrites every section of the results page,
+``docs/results.md`` (issue #54: the README links it), between
 ``<!-- results:TABLE:begin -->`` and ``<!-- results:TABLE:end -->`` (``results:TABLE/BUDGET``
 for another budget than quick) from those files and the table file (its budget,
 findings and deviations); ``--check`` only says which sections differ (exit 1).
 A table without a published file gets a section that says so and points to its older
 renderings (``docs/results/TABLE-BUDGET-*seeds.md``) as history, with no numbers.
+(The module keeps its name, ``readme``, and its functions theirs: the command and the
+API are those the README's sections were rendered with.)
 """
 from __future__ import annotations
 
@@ -25,7 +28,7 @@ from .protocol import finding_label, protocol_lines, table_hash
 from .report import SMOKE_BANNER, machines_note, results_table, status_text
 from .table_files import load_table
 
-__all__ = ["FORMAT", "MARKER", "published_path", "publish", "load_published", "findings_table",
+__all__ = ["FORMAT", "MARKER", "PAGE", "default_page", "published_path", "publish", "load_published", "findings_table",
            "render_section", "render_readme", "differing_sections", "main"]
 
 FORMAT = 1
@@ -184,7 +187,7 @@ def _status(f: dict) -> str:
 
 
 def findings_table(found: list) -> str:
-    """The README's findings table: the label of an exploratory finding, and its mark
+    """The results page's findings table: the label of an exploratory finding, and its mark
     never in bold."""
     lines = ["| finding | ours | report | status |", "|---|---|---|---|"]
     lines += [f"| {finding_label(f)} | {f['ours']} | {f['report']} | {_status(f)} |"
@@ -303,43 +306,57 @@ def differing_sections(text: str, results_dir, readme_dir) -> list:
     return [m["key"] for m in MARKER.finditer(new) if old.get(m["key"]) != m["body"]]
 
 
+#: the generated page, relative to the source tree (and to the working directory)
+PAGE = Path("docs") / "results.md"
+
+
+def default_page() -> Path:
+    """``docs/results.md`` of the working directory when it has one (a checkout, with the
+    package installed from it), else of the source tree this module sits in."""
+    for base in (Path.cwd(), Path(__file__).resolve().parents[3]):
+        if (base / PAGE).is_file():
+            return base / PAGE
+    return Path(__file__).resolve().parents[3] / PAGE
+
+
 def main(argv=None) -> int:
-    root = Path(__file__).resolve().parents[3]
     p = argparse.ArgumentParser(
         prog="python -m bsp_fast.reproduction.readme",
-        description="Rewrite the README's result sections (between <!-- results:TABLE:begin "
-                    "--> and <!-- results:TABLE:end -->) from docs/results/TABLE-BUDGET.json "
-                    "and the table files. Exit codes: 0 done (or, with --check, up to "
-                    "date), 1 --check found sections that differ, 2 bad input.")
-    p.add_argument("--readme", default=str(root / "README.md"), metavar="FILE",
-                   help="the page to rewrite (default: the source tree's README.md)")
+        description="Rewrite the result sections of docs/results.md (between <!-- "
+                    "results:TABLE:begin --> and <!-- results:TABLE:end -->) from "
+                    "docs/results/TABLE-BUDGET.json and the table files. Exit codes: 0 done "
+                    "(or, with --check, up to date), 1 --check found sections that differ, "
+                    "2 bad input.")
+    p.add_argument("--page", "--readme", dest="page", default=None, metavar="FILE",
+                   help="the page to rewrite (default: docs/results.md of the working "
+                        "directory, else of the source tree)")
     p.add_argument("--results", default=None, metavar="DIR",
-                   help="published results (default: docs/results beside the README)")
+                   help="published results (default: results/ beside the page, "
+                        "docs/results)")
     p.add_argument("--check", action="store_true",
                    help="change nothing; list the sections that differ from their rendering")
     ns = p.parse_args(argv)
-    readme = Path(ns.readme)
-    results = Path(ns.results) if ns.results else readme.parent / "docs" / "results"
+    page = Path(ns.page) if ns.page else default_page()
+    results = Path(ns.results) if ns.results else page.parent / "results"
     try:
-        text = readme.read_text(encoding="utf-8")
+        text = page.read_text(encoding="utf-8")
         if ns.check:
-            bad = differing_sections(text, results, readme.parent)
+            bad = differing_sections(text, results, page.parent)
             for key in bad:
-                print(f"{readme}: section results:{key} differs from its rendering")
+                print(f"{page}: section results:{key} differs from its rendering")
             return 1 if bad else 0
-        new, keys = render_readme(text, results, readme.parent)
+        new, keys = render_readme(text, results, page.parent)
     except (OSError, ValueError) as exc:
         print(f"readme: {exc}", file=sys.stderr)
         return 2
     if not keys:
-        print(f"readme: {readme} has no <!-- results:TABLE:begin --> section", file=sys.stderr)
+        print(f"readme: {page} has no <!-- results:TABLE:begin --> section", file=sys.stderr)
         return 2
     if new != text:
-        write_text(readme, new)
-    print(f"{readme}: {len(keys)} section(s) rendered ({', '.join(keys)})"
+        write_text(page, new)
+    print(f"{page}: {len(keys)} section(s) rendered ({', '.join(keys)})"
           + ("" if new != text else "; unchanged"))
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())
