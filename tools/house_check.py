@@ -6,7 +6,10 @@ guarantees", "House rules a parse can check"):
   a lazy import only hides a cycle);
 * no module imports another module's private (``_name``) function, class or variable
   (private *modules* such as ``_native`` are the package's own and may be imported);
-* no file over LIMIT lines in ``python/`` or ``cpp/``;
+* no Python function over FUNCTION_LIMIT lines, but the few of :data:`LONG_FUNCTIONS`,
+  each with the reason it reads best whole (a file is split along its seams, not to fit a
+  count), in Python and in C++ (a C++ function whose definition starts at column 0 and
+  ends at the next ``}`` there);
 * one temp-then-rename helper per language: ``os.replace``/``os.rename`` only in
   ``bsp_fast/atomic.py``, ``std::rename``/``::rename`` only in ``cpp/src/common/``;
 * the default seed written as a literal only in ``bsp_fast/defaults.py`` and the C++
@@ -21,7 +24,31 @@ import re
 import sys
 from pathlib import Path
 
-LIMIT = 450
+FUNCTION_LIMIT = 60
+#: functions allowed over FUNCTION_LIMIT lines, and why (``path:function``)
+LONG_FUNCTIONS = {
+    # declarative command lines: one add_argument per option, nothing to split but lists
+    "preview/cli.py:build_parser": "an argparse declaration, one option after another",
+    "cpp/src/bindings/media.cpp:88": "pybind11 declarations, one .def after another",
+    "conversion/cli.py:_parser": "an argparse declaration, one option after another",
+    # one public function whose keyword arguments are documented where they are checked
+    "conversion/api.py:convert": "checks, then one call into the core, then the report",
+    "interop/clipfile.py:write_clip_file": "one HDF5 layout written top to bottom",
+    "interop/exporters.py:export_coco": "one COCO document built top to bottom",
+    "interop/exporters.py:export_videopose3d": "one VideoPose3D archive built top to bottom",
+    "interop/readers.py:read_coco": "the COCO format's cases, one after another",
+    "interop/benchmark_annotations.py:import_tracks": "one import, checks then writes",
+    "reproduction/table_files.py:load_table": "one table file's checks, key by key",
+    "training/eval_breakdown.py:_frame_tables": "one table per breakdown, side by side",
+    "training/setup.py:make_trainer": "the Trainer's arguments, one group after another",
+    "preview/frames.py:preview_frames": "one figure drawn top to bottom",
+    "synth/generate.py:generate": "one dataset: plan, clips, config, top to bottom",
+    "conversion/sharded.py:convert_sharded": "plan, submit, gather, one after another",
+    # the two orchestrators: plan -> run -> collect is the open work of the house's
+    # fourth pass (docs/architecture.md)
+    "training/train.py:_run": "to be split into plan, run and collect",
+    "reproduction/runner.py:run_table": "to be split into plan, run and collect",
+}
 ROOT = Path(__file__).resolve().parent.parent
 PKG = ROOT / "python" / "bsp_fast"
 SEED = "22742"
@@ -122,14 +149,35 @@ def cycles(edges: dict) -> list:
     return out
 
 
-def long_files() -> list:
+def long_functions() -> list:
     out = []
-    for base, pats in ((ROOT / "python", ("*.py",)), (ROOT / "cpp", ("*.cpp", "*.hpp", "*.h"))):
-        for pat in pats:
-            for p in base.rglob(pat):
-                n = sum(1 for _ in p.open(encoding="utf-8"))
-                if n > LIMIT:
-                    out.append(f"{p.relative_to(ROOT)}: {n} lines (limit {LIMIT})")
+    for p in PKG.rglob("*.py"):
+        rel = p.relative_to(PKG).as_posix()
+        for node in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                n = node.end_lineno - node.lineno + 1
+                if n > FUNCTION_LIMIT and f"{rel}:{node.name}" not in LONG_FUNCTIONS:
+                    out.append(f"python/bsp_fast/{rel}:{node.lineno}: {node.name} is {n} "
+                               f"lines (limit {FUNCTION_LIMIT}; split it, or list it in "
+                               "LONG_FUNCTIONS with why)")
+    return out + long_cpp_functions()
+
+
+def long_cpp_functions() -> list:
+    out = []
+    head = re.compile(r"^[A-Za-z].*\)\s*(const\s*)?(noexcept\s*)?\{\s*$")
+    for p in (ROOT / "cpp").rglob("*.[ch]pp"):
+        start = None
+        for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1):
+            if start is None and head.match(line) and not line.startswith(
+                    ("namespace", "struct", "class", "enum", "extern")):
+                start = i
+            elif start is not None and line.startswith("}"):
+                where = f"{p.relative_to(ROOT)}:{start}"
+                if i - start + 1 > FUNCTION_LIMIT and where not in LONG_FUNCTIONS:
+                    out.append(f"{where}: a function of {i - start + 1} lines (limit "
+                               f"{FUNCTION_LIMIT})")
+                start = None
     return out
 
 
@@ -169,7 +217,7 @@ def main() -> int:
     mods = _modules()
     edges, private = imports(mods)
     problems = [f"import cycle: {' <-> '.join(c)}" for c in cycles(edges)]
-    problems += private + long_files() + renames() + seeds()
+    problems += private + long_functions() + renames() + seeds()
     for p in problems:
         print(p)
     print(f"house_check: {len(mods)} modules, {len(problems)} problem(s)")

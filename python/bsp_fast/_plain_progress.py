@@ -7,7 +7,7 @@ from __future__ import annotations
 import sys
 import time
 
-__all__ = ["INTERVAL", "is_terminal", "stamp", "PlainLines"]
+__all__ = ["INTERVAL", "is_terminal", "stamp", "PlainLines", "FALLBACK_NOTE", "readable"]
 
 #: seconds between two plain progress lines
 INTERVAL = 10.0
@@ -51,3 +51,17 @@ class PlainLines:
             self._closed = True
             if self.n >= self.total:
                 self._say(f"{self.desc} {self.n}/{self.total} done")
+
+
+#: what ``normaliser_fallback`` (a metric of every 2D-input task) means, for readers
+FALLBACK_NOTE = ("normaliser_fallback: share of input frames normalised by their joint box "
+                 "because the hips or neck were missing")
+
+
+def readable(values: dict) -> dict:
+    """Metrics as the progress lines and bsp-eval print them: ``normaliser_fallback`` only
+    when some frames needed the fallback (0 says nothing a reader needs; metrics.json keeps
+    it), and then named by :data:`FALLBACK_NOTE`."""
+    return {k: v for k, v in values.items()
+            if not (k.split("/")[-1] == "normaliser_fallback" and v == 0)}
+

@@ -183,7 +183,7 @@ def test_plain_class_without_lightning(h5file, monkeypatch):
         monkeypatch.setitem(sys.modules, name, None)  # makes the import fail
     try:
         plain = importlib.reload(dmod)
-        assert plain.LIGHTNING is False and plain.BSPDataModule.__mro__[1] is object
+        assert plain.LIGHTNING is False and plain.BSPDataModule.__mro__[2] is object
         dm = plain.BSPDataModule(h5_path=h5file, task="lifting", batch_size=8)
         dm.prepare_data()
         dm.setup()

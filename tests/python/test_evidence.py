@@ -25,7 +25,7 @@ from bsp_fast.reproduction import evidence as E
 from bsp_fast import reproduction as R
 from bsp_fast.reproduction import runner as S
 from bsp_fast.training.scoring import TaskMetrics
-from bsp_fast.training.train import resolve_precision
+from bsp_fast.training.precision import resolve_precision
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

@@ -430,6 +430,7 @@ def test_installed_layout_finds_the_tables_outside_the_source_tree(tmp_path):
         assert (site / "bsp_fast" / "experiments" / f"{t}.yaml").read_bytes() == \
             (ROOT / "experiments" / f"{t}.yaml").read_bytes()
     # and the command runs there (--dry-run: the per-row configs of the smoke budget)
+    (tmp_path / "ds").mkdir(exist_ok=True)
     r = subprocess.run([sys.executable, "-m", "bsp_fast", "reproduce", "autoencoder", "--data",
                         str(tmp_path / "ds"), "--budget", "smoke", "--dry-run", "--out", "runs"],
                        cwd=elsewhere, env=env, capture_output=True, text=True, timeout=300)
@@ -446,15 +447,16 @@ def test_reproduce_reads_a_users_own_table_file(tmp_path, capsys):
     mine.write_text(text.replace("table: autoencoder", "table: my_autoencoder", 1))
     assert "table: my_autoencoder" in mine.read_text()
     out = tmp_path / "runs"
-    assert main(["--table", str(mine), "--data", str(tmp_path / "ds"), "--budget", "smoke",
+    (tmp_path / "ds").mkdir()
+    assert main([str(mine), "--data", str(tmp_path / "ds"), "--budget", "smoke",
                  "--dry-run", "--out", str(out)]) == 0
     assert (out / "my_autoencoder-smoke" / "configs").is_dir()
     assert "bsp-train --config" in capsys.readouterr().out
-    with pytest.raises(SystemExit) as e:  # both, or neither
-        main(["autoencoder", "--table", str(mine), "--data", "x"])
+    with pytest.raises(SystemExit) as e:  # one TABLE: a name or a path
+        main(["autoencoder", str(mine), "--data", "x"])
     assert e.value.code == 2
     with pytest.raises(SystemExit):
         main(["--data", "x"])
-    assert "give a TABLE name or --table FILE.yaml" in capsys.readouterr().err
-    assert main(["--table", str(tmp_path / "nope.yaml"), "--data", "x", "--dry-run"]) == 2
+    assert "the following arguments are required: TABLE" in capsys.readouterr().err
+    assert main([str(tmp_path / "nope.yaml"), "--data", "x", "--dry-run"]) == 2
     assert "nope.yaml: no such table file" in capsys.readouterr().err

@@ -234,7 +234,7 @@ def test_smoke_curves_then_the_table_runs(c32, tmp_path):
     tab = load_table(out / "ablation_pose_temporal.yaml")
     assert tab["budgets"]["quick"]["max_steps"] == b["updates"]
     res = bsp_fast.reproduction.cli.main(
-        ["--table", str(out / "ablation_pose_temporal.yaml"), "--data", str(h5), "--budget",
+        [str(out / "ablation_pose_temporal.yaml"), "--data", str(h5), "--budget",
          "smoke", "--out", str(tmp_path / "repro"), "--rows", "full,pose_cnn,average_skeleton"])
     assert res == 0
     md = (tmp_path / "repro" / "ablation_pose_temporal-smoke" / "results.md").read_text()

@@ -74,7 +74,7 @@ def finished(tmp_path_factory):
     data = root / "l30.h5"
     write_clip_file(data, clips=(24, 12, 12), clip_length=30, seed=2)
     table = _write(root / "experiments" / "tiny_ae.yaml", _tiny_doc())
-    argv = ["--table", table, "--data", data, "--budget", "smoke", "--out", root / "runs"]
+    argv = [table, "--data", data, "--budget", "smoke", "--out", root / "runs"]
     code, text, err = _main(argv + ["--publish", root / "docs" / "results"])
     assert code == 0, err
     base = root / "runs" / "tiny_ae-smoke"
@@ -257,7 +257,7 @@ def test_deviations_appended_later_keep_the_hash_and_are_printed(finished, tmp_p
     table = _write(tmp_path / "tiny_ae.yaml", doc)
     assert P.table_hash(table) == P.table_hash(finished["table"])
     argv = list(finished["argv"])
-    argv[1] = table
+    argv[0] = table
     code, text, err = _main(argv)
     assert code == 0, err
     assert "[clean] reusing" in text  # no training
@@ -274,7 +274,7 @@ def test_a_changed_table_refuses_to_mix_unless_allowed(finished, tmp_path):
     table = _write(tmp_path / "tiny_ae.yaml", doc)
     new = P.table_hash(table)
     argv = list(finished["argv"])
-    argv[1] = table
+    argv[0] = table
     # options given over the table file's are part of the protocol; the loader's are not
     code, text, err = _main(finished["argv"] + ["--set", "workers=0"])
     assert code == 0 and "[clean] reusing" in text, err
@@ -425,6 +425,7 @@ def test_with_published_trains_only_the_missing_seeds(finished, two_seeds):
     code, text, err = _main(argv + ["--with-published", two_seeds / "results"])
     assert code == 0 and "[clean seed 22744] reusing" in text, err
     # other data than the published table's: refused before anything is written
+    (finished["root"] / "x.h5").write_bytes(b"")
     code, _, err = _main(argv[:argv.index("--data") + 1] + [finished["root"] / "x.h5"]
                          + argv[argv.index("--data") + 2:]
                          + ["--with-published", two_seeds / "results"])

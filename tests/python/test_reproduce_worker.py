@@ -148,7 +148,7 @@ def test_sigterm_stops_the_workers_runs_resumably_and_a_rerun_finishes_them(tmp_
     write_clip_file(clips, clips=(24, 8, 8), clip_length=30, seed=6)
     table = tmp_path / "tiny_stop.yaml"
     table.write_text(yaml.safe_dump(doc, sort_keys=False))
-    argv = [sys.executable, "-m", "bsp_fast", "reproduce", "--table", str(table), "--data",
+    argv = [sys.executable, "-m", "bsp_fast", "reproduce", str(table), "--data",
             str(clips), "--budget", "smoke", "--seeds", "2", "--jobs", "2", "--out",
             str(tmp_path / "runs")]
     env = runner._env()

@@ -1,7 +1,7 @@
-"""The house's third pass (#35): bsp-reproduce is its own package on top of training, with
-one runner and one report writer; the old import paths keep working for one release."""
+"""bsp-reproduce is its own package on top of training, with one runner and one report
+writer; no old import path is kept alive (a 0.1 package has no users of them to keep)."""
 import ast
-import warnings
+import importlib
 from pathlib import Path
 
 import pytest
@@ -24,8 +24,6 @@ def test_nothing_in_training_imports_reproduction():
 
 
 def test_training_holds_one_run_and_tasks_only_declarations():
-    files = sorted(p.name for p in (PKG / "training").glob("*.py"))
-    assert len(files) <= 20, files
     tasks = (PKG / "training" / "tasks").glob("*.py")
     for path in tasks:  # declarations: nothing above tasks/, no torch or Lightning on import
         tree = ast.parse(path.read_text())
@@ -39,39 +37,12 @@ def test_training_holds_one_run_and_tasks_only_declarations():
                 assert not any(m.split(".")[0] in ("torch", "lightning") for m in mods), path
 
 
-@pytest.mark.parametrize("old,new,name", [
-    ("bsp_fast.training.reproduce", "bsp_fast.reproduction", "main"),
-    ("bsp_fast.training.seeds", "bsp_fast.reproduction.runner", "reproduce_seeds"),
-    ("bsp_fast.training.seeds", "bsp_fast.reproduction.figures", "learning_curves"),
-    ("bsp_fast.training.evidence", "bsp_fast.reproduction.evidence", "summarise"),
-    ("bsp_fast.training.evidence", "bsp_fast.reproduction.report", "format_table"),
-    ("bsp_fast.training.table_files", "bsp_fast.reproduction.table_files", "load_table"),
-    ("bsp_fast.training.breakdown", "bsp_fast.training.per_recording", "FILE"),
-    ("bsp_fast.training.tasks.module", "bsp_fast.training.module", "LiftingTask"),
-])
-def test_old_import_paths_still_work_and_say_where_things_moved(old, new, name):
-    import importlib
-    import sys
-
-    sys.modules.pop(old, None)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        mod = importlib.import_module(old)
-        got = getattr(mod, name)
-    assert got is getattr(importlib.import_module(new), name)
-    assert any(issubclass(w.category, DeprecationWarning) and new in str(w.message)
-               for w in caught)
-    with pytest.raises(AttributeError, match="no attribute"):
-        getattr(mod, "no_such_name")
-
-
-def test_the_lightning_modules_moved_out_of_the_task_registry():
-    from bsp_fast.training import module, tasks
-
-    with pytest.warns(DeprecationWarning, match="bsp_fast.training.module.LiftingTask"):
-        assert tasks.LiftingTask is module.LiftingTask
-    with pytest.raises(AttributeError):
-        tasks.NoSuchTask  # noqa: B018
+@pytest.mark.parametrize("old", ["bsp_fast.training.reproduce", "bsp_fast.training.seeds",
+                                 "bsp_fast.training.evidence", "bsp_fast.training.breakdown",
+                                 "bsp_fast.training.tasks.module"])
+def test_no_shims_for_old_import_paths(old):
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module(old)
 
 
 def test_smoke_tables_carry_the_banner_and_others_do_not(tmp_path):
@@ -96,7 +67,7 @@ def test_a_new_bsp_train_option_reaches_eval_predict_and_reproduce(monkeypatch, 
     knob = C.Option("frobnicate_level", "int", 0, "how hard to frobnicate (a test option)",
                     "training", minimum=0, metavar="N", scoring=True)
     monkeypatch.setattr(C, "OPTIONS", C.OPTIONS + (knob,))
-    for main in (evaluate.main, predict.main, reproduce_cli.main):
+    for main in (evaluate.main, predict.main):
         with pytest.raises(SystemExit):
             main(["--help"])
         out = capsys.readouterr().out
@@ -110,9 +81,11 @@ def test_a_new_bsp_train_option_reaches_eval_predict_and_reproduce(monkeypatch, 
     assert "frobnicate_level must be >= 0" in capsys.readouterr().err
     # a scoring option absent from the line is no override (the run's value stays)
     assert given_overrides(p.parse_args(["run"]), ns.overrides) == {}
-    # bsp-reproduce takes every option but the run's identity, for every row
-    rp = reproduce_cli.build_parser()
-    ns = rp.parse_args(["lifting", "--data", "d", "--epochs", "3", "--frobnicate-level", "2"])
-    assert given_overrides(ns, ns.overrides) == {"epochs": 3, "frobnicate_level": 2}
-    flags = {f for a in rp._actions for f in a.option_strings}
-    assert not flags & {"--model", "--resume", "--task", "--seed", "--hp"}
+    # bsp-reproduce takes every option but the run's identity, for every row, as --set
+    assert reproduce_cli.parse_set(["epochs=3", "frobnicate-level=2"]) == {
+        "epochs": 3, "frobnicate_level": 2}
+    with pytest.raises(C.ConfigError, match="did you mean 'epochs'"):
+        reproduce_cli.parse_set(["epohcs=1"])
+    for name in ("model", "resume", "task", "seed"):
+        with pytest.raises(C.ConfigError, match="not a per-row override"):
+            reproduce_cli.parse_set([f"{name}=1"])

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from bsp_fast.data.testing import write_clip_file
-from bsp_fast.training import lifecycle
+from bsp_fast.training import lifecycle, stopping
 from bsp_fast.training.train import main as train_main
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -34,7 +34,7 @@ LAST = 5
 LAUNCHER = """
 import os, sys, time
 from pathlib import Path
-from bsp_fast.training import lifecycle
+from bsp_fast.training import lifecycle, stopping
 epoch, batch = map(int, os.environ["STOP_AT"].split(","))
 orig = lifecycle.Lifecycle.on_train_batch_end
 def hook(self, trainer, pl_module, outputs, b, batch_idx):
@@ -131,7 +131,7 @@ def _stop_at(monkeypatch, epoch: int, batch: int, legacy: bool = False):
                 self.epoch, self.batches_done = trainer.current_epoch, batch_idx + 1
                 self.step = trainer.global_step
                 self.save(trainer, state="interrupted", signal="SIGTERM")
-                raise lifecycle.Interrupted(self.sig.received)
+                raise stopping.Interrupted(self.sig.received)
         return orig(self, trainer, pl_module, outputs, b, batch_idx)
 
     monkeypatch.setattr(lifecycle.Lifecycle, "on_train_batch_end", hook)

@@ -133,10 +133,23 @@ def test_initial_metrics_are_the_trivial_baselines(runs, data):
 
 @pytest.mark.parametrize("task", list(TINY))
 def test_eval_reproduces_metrics_json(runs, task):
-    saved = json.loads((runs[task].run_dir / "metrics.json").read_text())["test"]
-    res = bsp_fast.evaluate(runs[task].run_dir)
-    assert res.task == task and res.split == "test"
-    assert res.metrics == pytest.approx(saved, rel=1e-9)
+    """bsp-eval scores in plain PyTorch: Trainer.test's numbers (metrics.json and the
+    per-recording sums) to the last digit, without importing Lightning."""
+    run = runs[task].run_dir
+    code = ("import json, sys\n"
+            "from bsp_fast.training.evaluate import evaluate\n"
+            "r = evaluate(sys.argv[1])\n"
+            "print(json.dumps({'task': r.task, 'split': r.split, 'metrics': r.metrics,\n"
+            "                  'per_recording': r.per_recording,\n"
+            "                  'lightning': 'lightning' in sys.modules}))")
+    out = subprocess.run([sys.executable, "-c", code, str(run)], capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    res = json.loads(out.stdout.splitlines()[-1])
+    assert res["task"] == task and res["split"] == "test" and not res["lightning"]
+    assert res["metrics"] == json.loads((run / "metrics.json").read_text())["test"]
+    saved = json.loads((run / "test_per_recording.json").read_text())["test"]
+    assert {k: res["per_recording"][k] for k in saved} == saved
 
 
 def test_eval_cli_and_table(runs, capsys, tmp_path):
@@ -240,6 +253,7 @@ def test_predict_writes_denormalised_outputs(runs, data, tmp_path):
     out = tmp_path / "cls.h5"
     assert predict_main([str(runs["classification"].run_dir), "--out", str(out), "--quiet"]) == 0
     with h5py.File(out) as f:
+        assert "units" not in f.attrs  # logits, probabilities, 0/1: no pixels
         acc = np.mean(f["prediction"][()] == f["label"][()])
         assert acc == pytest.approx(runs["classification"].metrics["accuracy"])
         f1 = bsp_fast.metrics.f1_score(f["prediction"][()], f["label"][()])
@@ -346,7 +360,7 @@ def test_bad_input_fails_cleanly(runs, data, tmp_path, capsys):
         (["lifting", "resnet", "--data", h5], 2,
          "unknown model 'resnet' for task 'lifting'; allowed: baseline_3d"),
         (["lifting", "baseline_3d", "--data", h5, "--hp", "width=3"], 2,
-         "has no hyper-parameter(s) ['width']; allowed: linear_size=1024"),
+         "has no hyper-parameter 'width'; allowed: linear_size=1024"),
         (["lifting", "baseline_3d", "--data", h5, "--hp", "linear_size=-1"], 2, "linear_size"),
         (["lifting", "baseline_3d", "--resume", str(runs["classification"].run_dir)], 2,
          "is a 'classification' run of model 'lstm'; it cannot continue as task 'lifting'"),

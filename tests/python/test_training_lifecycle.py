@@ -18,8 +18,9 @@ import torch
 
 import bsp_fast
 from bsp_fast.data.testing import write_clip_file
-from bsp_fast.training import lifecycle
+from bsp_fast.training import lifecycle, stopping
 from bsp_fast.training import runs as runs_mod
+from bsp_fast.training.config import parse_duration
 from bsp_fast.training.train import main as train_main
 
 REPO = Path(__file__).resolve().parents[2]
@@ -194,7 +195,7 @@ def test_a_signal_between_epochs_trains_on_to_the_next_batch_and_saves(clips, un
 
     monkeypatch.setattr(lifecycle.Lifecycle, "on_train_epoch_start", signalled)
     out = tmp_path / "run"
-    with pytest.raises(lifecycle.Interrupted):
+    with pytest.raises(stopping.Interrupted):
         bsp_fast.train(*MODEL, data=clips, out=out, **_opts())
     monkeypatch.setattr(lifecycle.Lifecycle, "on_train_epoch_start", real)
     ckpt = torch.load(out / "checkpoints" / "last.ckpt", weights_only=True)
@@ -479,13 +480,13 @@ def test_checkpoint_every_is_checked_before_any_work(clips, tmp_path, capsys):
     assert train_main([*MODEL, "--data", str(clips), "--out", str(tmp_path / "r"),
                        "--checkpoint-every", "soon"]) == 2
     assert "checkpoint_every expects a duration" in capsys.readouterr().err
-    assert lifecycle.parse_duration("10m") == 600 and lifecycle.parse_duration("0") == 0
-    assert lifecycle.parse_duration("1.5h") == 5400 and lifecycle.parse_duration("90s") == 90
+    assert parse_duration("10m") == 600 and parse_duration("0") == 0
+    assert parse_duration("1.5h") == 5400 and parse_duration("90s") == 90
 
 
 def test_reproduce_continues_an_interrupted_row(tmp_path, monkeypatch):
     from bsp_fast.reproduction import worker
-    from bsp_fast.training import seeds
+    from bsp_fast.reproduction import runner as seeds
 
     run = tmp_path / "stopped"
     (run / "checkpoints").mkdir(parents=True)

@@ -4,13 +4,14 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..command_line import ArgumentParser
 from ..atomic import DATASET_FILES, OutputOverlapError, check_outputs, refuse
 
 EXIT_CLEAN, EXIT_PROBLEMS, EXIT_USAGE = 0, 1, 2
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="bsp-check",
         description="Check a CARLA-BSP dataset: files referenced by data.csv that are "
                     "missing and media files no row references; per recording the MP4 and "

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..conversion.errors import BadDataset
+from ..conversion.inputs import dataset_config
 from .rows import (IN_SEG, event_camera_file, media_on_disk, read_table, recordings,
                    statistics)
 from .scan import scan_entries, scan_job
@@ -49,17 +51,12 @@ def dataset_paths(dataset) -> tuple:
 
 
 def read_config(root: str) -> dict:
-    """config.yaml beside data.csv (bsp-synth writes one), or {}."""
-    path = os.path.join(root, "config.yaml")
-    if not os.path.isfile(path):
-        return {}
-    import yaml
-
+    """config.yaml beside data.csv, or {} (also when it is unreadable: the check reports
+    on the data, bsp-convert on the file)."""
     try:
-        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError):
+        return dataset_config(root)
+    except BadDataset:
         return {}
-    return doc if isinstance(doc, dict) else {}
 
 
 def _finding(kind, message, recording=None, path=None, lines=None) -> dict:

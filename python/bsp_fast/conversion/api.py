@@ -29,7 +29,7 @@ from ..atomic import atomic_output
 from ..defaults import CONVERT, CROP_BOXES
 from . import report as _report
 from .errors import UnusableConversion
-from .inputs import dataset_csv, dataset_fov, refuse_inputs_as_output
+from .inputs import dataset_csv, dataset_fov, poses_only, refuse_inputs_as_output
 
 __all__ = ["convert", "conversion_settings", "clip_settings"]
 
@@ -87,14 +87,16 @@ def clip_settings(*, clip_length=None, clip_offset=None, eval_clip_offset=None,
 def conversion_settings(dataset, *, clip_length=None, clip_offset=None, eval_clip_offset=None,
                         fov=None, min_video_length=None, label=CONVERT["label"], benchmark=False,
                         val_frac=CONVERT["val_frac"], test_frac=CONVERT["test_frac"],
-                        seed=CONVERT["seed"], balance=False, compress=False, media=True,
+                        seed=CONVERT["seed"], balance=False, compress=False, media=None,
                         crop_size=CONVERT["crop_size"], skip_bad_media=False,
                         crop_box=CONVERT["crop_box"],
                         crop_context=CONVERT["crop_context"]) -> dict:
     """The validated, fully resolved options that decide what :func:`convert` writes (the
     ``settings`` of its report and the ``settings_json`` attribute of the file): defaults
-    filled in, the FOV looked up in the dataset's config.yaml. Raises ValueError."""
+    filled in, the FOV looked up in the dataset's config.yaml, ``media`` None: on unless
+    config.yaml says the dataset has none (``poses_only: true``). Raises ValueError."""
     root, _ = dataset_csv(dataset)
+    media = _media(root, media)
     clip = clip_settings(clip_length=clip_length, clip_offset=clip_offset,
                          eval_clip_offset=eval_clip_offset, min_video_length=min_video_length,
                          label=label, benchmark=benchmark, val_frac=val_frac,
@@ -122,10 +124,23 @@ def conversion_settings(dataset, *, clip_length=None, clip_offset=None, eval_cli
                 skip_bad_media=bool(skip_bad_media) if media else None)
 
 
+def _media(root, media):
+    """``media`` resolved: None follows the dataset's config.yaml (a ``--poses-only``
+    dataset has no MP4/APNG files); asking for the media of such a dataset is an error."""
+    none = poses_only(root)
+    if media is None:
+        return not none
+    if media and none:
+        raise ValueError(f"{Path(root) / 'config.yaml'} says poses_only: true (the dataset has "
+                         "no MP4/APNG files); convert it without the media (--no-media, "
+                         "media=False)")
+    return bool(media)
+
+
 def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_offset=None,
             fov=None, min_video_length=None, label=CONVERT["label"], benchmark=False,
             val_frac=CONVERT["val_frac"], test_frac=CONVERT["test_frac"], seed=CONVERT["seed"],
-            balance=False, threads=None, verify=False, compress=False, media=True,
+            balance=False, threads=None, verify=False, compress=False, media=None,
             crop_size=CONVERT["crop_size"], skip_bad_media=False, force=False,
             progress=None, strict=False, client=None, shards=None,
             crop_box=CONVERT["crop_box"], crop_context=CONVERT["crop_context"]) -> dict:
@@ -142,7 +157,8 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
     dataset's config.yaml, else 90 degrees. The output is written under a temporary name
     and renamed when complete; an existing ``out_path`` is kept unless ``force``.
 
-    ``media`` (default on) decodes each recording's MP4 and segmentation APNG once and
+    ``media`` (default: on, unless the dataset's config.yaml says ``poses_only: true``)
+    decodes each recording's MP4 and segmentation APNG once and
     stores ``crop_size`` x ``crop_size`` pedestrian crops (RGB and class tags), mask
     statistics and joint visibility of every frame the clips use. A missing or broken media
     file fails the conversion naming the file, unless ``skip_bad_media``: then its
@@ -200,6 +216,8 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
                    crop_box=crop_box, crop_context=float(crop_context),
                    source_path=str(root.resolve()),
                    extra_attrs={"settings_json": json.dumps(settings, sort_keys=True)})
+    why_none = None if st["media"] else (
+        "the dataset's config.yaml says poses_only: true" if media is None else "media=False")
     out.parent.mkdir(parents=True, exist_ok=True)
     if client is not None:
         from .sharded import convert_sharded
@@ -207,6 +225,7 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
         report = convert_sharded(str(csv), out, options, client, shards=shards, strict=strict,
                                  root=root, force=force)
         report["settings"] = settings
+        report["media"]["why_none"] = why_none
         for w in report["warnings"]:
             warnings.warn(f"bsp_fast.convert: {w} ({out})", UserWarning, stacklevel=2)
         return report
@@ -218,6 +237,7 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
                                      + "; ".join(report["warnings"]) + "; nothing written")
     report["output"] = str(out)
     report["settings"] = settings
+    report["media"]["why_none"] = why_none
     for w in report["warnings"]:
         warnings.warn(f"bsp_fast.convert: {w} ({out})", UserWarning, stacklevel=2)
     return report

@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import threading
 import warnings
 
+from ..command_line import ArgumentParser, HelpFormatter
 from .._native import core as _core
 from ..atomic import OutputOverlapError, refuse
 from ..dask_cluster import SCHEDULER_HELP, run_on_scheduler
@@ -16,27 +18,23 @@ from .report import format_report, verify_table
 
 __all__ = ["main"]
 
+#: the core's errors about a recording's MP4 or APNG (missing, unreadable, broken)
+MEDIA_ERRORS = (_core.VideoDecodeError, _core.ApngError)
 
-class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Shows "(default: X)" only where the option has a real default that the help text
-    does not already explain."""
 
-    def _get_help_string(self, action):
-        text = action.help or ""
-        if action.default is None or action.default is False or "default" in text:
-            return text
-        return super()._get_help_string(action)
+def _media_error(exc) -> bool:
+    return isinstance(exc, MEDIA_ERRORS) or bool(re.search(r"\.(mp4|png|apng): ", str(exc)))
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="bsp-convert",
         description="Convert a CARLA-BSP dataset (data.csv + clips/) into train/val/test clips "
                     "in one HDF5 file.",
         epilog="Exit codes: 0 success, 1 bad input, I/O error, or (--strict) an unusable "
                "result, 2 bad arguments, 3 output exists (use --force), 4 --verify found "
                "recordings beyond tolerance, 130 interrupted.",
-        formatter_class=_HelpFormatter)
+        formatter_class=HelpFormatter)
     p.add_argument("dataset", help="dataset directory holding data.csv (or the data.csv itself)")
     p.add_argument("output", help="HDF5 file to write (written to a temporary name, then renamed)")
     p.add_argument("--clip-length", type=int, default=None, metavar="L",
@@ -82,7 +80,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="shuffle+deflate the large target arrays and the RGB crops (smaller, "
                         "slower to read); the masks are always deflated")
     p.add_argument("--no-media", action="store_true",
-                   help="skip the media: no crops, masks or joint visibility, no MP4/APNG opened")
+                   help="skip the media: no crops, masks or joint visibility, no MP4/APNG "
+                        "opened (a dataset whose config.yaml says poses_only: true, as "
+                        "bsp-synth --poses-only writes, has none and converts without them)")
     p.add_argument("--crop-size", type=int, default=CONVERT["crop_size"], metavar="S",
                    help="side of the square pedestrian crops (RGB and class-tag mask) in pixels")
     p.add_argument("--crop-box", default=CONVERT["crop_box"], choices=CROP_BOXES,
@@ -161,7 +161,8 @@ def _convert_cli(args, client) -> int:
                 fov=args.fov, min_video_length=args.min_video_length, label=args.label,
                 benchmark=args.benchmark, val_frac=args.val_frac, test_frac=args.test_frac,
                 seed=args.seed, balance=args.balance, threads=args.threads, verify=args.verify,
-                compress=args.compress, media=not args.no_media, crop_size=args.crop_size,
+                compress=args.compress, media=False if args.no_media else None,
+                crop_size=args.crop_size,
                 skip_bad_media=args.skip_bad_media, force=args.force,
                 crop_box=args.crop_box, crop_context=args.crop_context,
                 progress=False if args.quiet else None, strict=args.strict, client=client,
@@ -183,7 +184,9 @@ def _convert_cli(args, client) -> int:
         print("bsp-convert: interrupted; no output written", file=sys.stderr)
         return 130
     except (OSError, _core.Error) as exc:
-        print(f"bsp-convert: {type(exc).__name__}: {exc}", file=sys.stderr)
+        hint = ("; convert without the media (--no-media) or leave such recordings out "
+                "(--skip-bad-media)" if _media_error(exc) else "")
+        print(f"bsp-convert: {type(exc).__name__}: {exc}{hint}", file=sys.stderr)
         return 1
     if not args.quiet:
         print(format_report(report))

@@ -9,7 +9,8 @@ from pathlib import Path
 from ..atomic import DATASET_FILES, check_outputs
 from .errors import BadDataset
 
-__all__ = ["dataset_csv", "dataset_fov", "refuse_inputs_as_output"]
+__all__ = ["dataset_csv", "dataset_config", "dataset_fov", "poses_only",
+           "refuse_inputs_as_output"]
 
 
 def dataset_csv(dataset) -> tuple[Path, Path]:
@@ -25,12 +26,13 @@ def dataset_csv(dataset) -> tuple[Path, Path]:
     raise FileNotFoundError(f"{p}: no such dataset directory or data.csv file")
 
 
-def dataset_fov(root: Path):
-    """FOV from a bsp-synth config.yaml beside data.csv, if there is one; BadDataset when
-    the file is not YAML, its top level not a mapping, or its FOV not a number in (0, 180)."""
-    cfg = root / "config.yaml"
+def dataset_config(root) -> dict:
+    """The dataset's config.yaml beside data.csv (bsp-synth writes one) as a mapping; {}
+    when there is none. BadDataset when the file is not YAML or its top level not a
+    mapping."""
+    cfg = Path(root) / "config.yaml"
     if not cfg.is_file():
-        return None
+        return {}
     import yaml
 
     try:
@@ -38,10 +40,24 @@ def dataset_fov(root: Path):
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
         raise BadDataset(f"{cfg}: not a readable YAML file: {exc}") from None
     if doc is None:
-        return None
+        return {}
     if not isinstance(doc, dict):
         raise BadDataset(f"{cfg}: expected a mapping (key: value lines) at the top level, "
                          f"found a {type(doc).__name__}")
+    return doc
+
+
+def poses_only(root) -> bool:
+    """Whether config.yaml says the dataset was generated without media (``bsp-synth
+    --poses-only``: data.csv and no MP4/APNG files)."""
+    return dataset_config(root).get("poses_only") is True
+
+
+def dataset_fov(root: Path):
+    """FOV from the dataset's config.yaml, if it gives one; BadDataset when the file is not
+    YAML, its top level not a mapping, or its FOV not a number in (0, 180)."""
+    doc = dataset_config(root)
+    cfg = Path(root) / "config.yaml"
     for key in ("fov", "camera_fov"):
         if key in doc:
             v = doc[key]

@@ -121,6 +121,8 @@ def format_report(r: dict) -> str:
                             if r.get("settings", {}).get("crop_box") == "mask" else ""))
         for path, why in media["bad"][:20]:
             lines.append(f"  left out {path}: {why}")
+    elif media.get("why_none"):
+        lines.append(f"media: none ({media['why_none']}): no crops, masks or joint visibility")
     for rec, why in r["skipped"][:20]:
         lines.append(f"  skipped {rec}: {why}")
     if len(r["skipped"]) > 20:

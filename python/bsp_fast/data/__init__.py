@@ -31,7 +31,7 @@ from .camera import camera_intrinsics, carla_to_opencv, focal_length, opencv_to_
 from ..conversion.vds import MissingShardError, check_virtual_sources, open_clip_file
 
 __all__ = [
-    "ClipDataset", "FrameDataset", "BSPDataModule", "ContiguousBatchSampler", "IndexBatch",
+    "ClipDataset", "FrameDataset", "BSPDataModule", "ClipData", "ContiguousBatchSampler", "IndexBatch",
     "collate_batch", "ImageAugment", "to_float_images",
     "TASKS", "SPLITS", "LIFTING_TARGETS", "DEFAULT_EVAL_SEED",
     "Compose", "Deform", "GaussianNoise", "MissingJoints", "HorizontalFlip", "RandomRotation",
@@ -48,7 +48,7 @@ _LAZY = {"ContiguousBatchSampler": "sampling", "IndexBatch": "sampling",
          "collate_batch": "sampling", "ClipDataset": "datasets", "TASKS": "datasets",
          "SPLITS": "datasets", "LIFTING_TARGETS": "datasets", "DEFAULT_EVAL_SEED": "datasets",
          "FrameDataset": "frames", "ImageAugment": "images", "to_float_images": "images",
-         "BSPDataModule": "datamodule"}
+         "BSPDataModule": "datamodule", "ClipData": "clip_data"}
 
 
 def __getattr__(name):

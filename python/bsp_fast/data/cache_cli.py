@@ -15,13 +15,14 @@ import sys
 import time
 from pathlib import Path
 
+from ..command_line import ArgumentParser
 from . import cache as C
 
 EXIT_OK, EXIT_USAGE = 0, 2
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="bsp-cache",
         description="The converted HDF5 files that bsp-train and BSPDataModule cache per "
                     "dataset (one per set of conversion options: --clip-length, "

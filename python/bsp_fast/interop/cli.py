@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
+from ..command_line import ArgumentParser
+from .._extras import require
 from ..atomic import OutputOverlapError, check_outputs, refuse
 from ..defaults import CONVERT
 from ..skeletons import JOINT_SETS, coverage_table
@@ -76,7 +79,7 @@ def _import_common(p) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="bsp-interop", description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(prog="bsp-interop", description=__doc__.split("\n\n")[0])
     sub = p.add_subparsers(dest="command", required=True)
     imp = sub.add_parser("import", help="2D detections -> clip file").add_subparsers(
         dest="format", required=True)
@@ -84,8 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "(MMPose, Detectron2)")
     c.add_argument("input", metavar="KEYPOINTS.json")
     c.add_argument("--images", metavar="IMAGES.json",
-                   help="COCO-style JSON whose images give video, frame and size per image id "
-                        "(needed for a results list)")
+                   help="input: a COCO-style JSON file whose images give video, frame and size "
+                        "per image id (needed for a results list)")
     c.add_argument("--image-size", type=_size, metavar="WxH",
                    help="image size where the images have none")
     c.add_argument("--joints", default="coco17", help="keypoint layout (default coco17)")
@@ -114,7 +117,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("out", metavar="OUT.json")
     e.add_argument("--results", action="store_true",
                    help="a results list (detector output) instead of annotations")
-    e.add_argument("--images", metavar="IMAGES.json", help="with --results: the images JSON")
+    e.add_argument("--images", metavar="IMAGES.json",
+                   help="output, with --results: also write the images JSON here (what "
+                        "import coco --images reads back)")
     e.add_argument("--joints", default="coco17", help="joint set (default coco17)")
     e.add_argument("--write-images", metavar="DIR",
                    help="also write the frames as the JPEGs file_name names, below DIR "
@@ -160,9 +165,27 @@ def _check_outputs(a) -> None:
     check_outputs(inputs=inputs, outputs=[("output", a.out)], read_dirs=read_dirs)
 
 
+def _check_inputs(a) -> None:
+    """Every input named on the line exists, and what a sub-command needs is installed,
+    before anything is read or written."""
+    named = [("the input", getattr(a, "input", None))]
+    if a.command == "import":
+        named += [(f"--{k.replace('_', '-')}", getattr(a, k, None))
+                  for k in ("images", "labels", "poses", "openpose", "split_dir")]
+    for what, path in named:
+        if path is not None and not Path(path).exists():
+            raise BadInput(f"{path}: no such file or folder ({what})")
+    if a.command == "export" and not Path(a.input).is_file():
+        raise BadInput(f"{a.input}: not a clip file (bsp-convert or bsp-interop import "
+                       "writes one)")
+    if a.command == "export" and a.format == "coco" and a.write_images:
+        require("cv2", "bsp-interop export coco --write-images")
+
+
 def _run(a) -> str:
     if a.command == "joints":
         return coverage_table(derive=not a.no_derive)
+    _check_inputs(a)
     _check_outputs(a)
     if a.command == "export":
         common = dict(joints=a.joints, split=a.split, derive=not a.no_derive, force=a.force)
@@ -303,6 +326,9 @@ def main(argv=None) -> int:
             text = _run(args)
     except OutputOverlapError as exc:
         return refuse("bsp-interop", exc)
+    except ImportError as exc:  # an optional dependency (its message names the extra)
+        print(f"bsp-interop: {exc}", file=sys.stderr)
+        return 1
     except FileExistsError as exc:
         print(f"bsp-interop: {exc}", file=sys.stderr)
         return 3

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from ..command_line import ArgumentParser
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE = 0, 1, 2
 
@@ -24,7 +25,7 @@ def _common(p, fps_default: float) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="bsp-preview",
         description="Draw CARLA-BSP data to look at it: a recording's frames with skeleton "
                     "and segmentation, a contact sheet of converted clips, a clip's 3D "

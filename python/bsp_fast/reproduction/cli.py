@@ -18,8 +18,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..command_line import ArgumentParser
 from ..training import config as C
-from ..training.overrides import add_overrides, given_overrides
+from ..command_line import unknown
+from ..training.overrides import NOT_OVERRIDES
 from ..training.runs import RunError
 from .runner import add_options, run_table
 from .table_files import BUDGETS, load_table, table_names
@@ -29,7 +31,7 @@ __all__ = ["build_parser", "main"]
 
 # ---------------------------------------------------------------------- CLI
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="bsp-reproduce",
         description="Run every row of one of the report's tables (experiments/TABLE.yaml) with "
                     "bsp-train, then print our table beside the report's numbers with each of the "
@@ -38,10 +40,9 @@ def build_parser() -> argparse.ArgumentParser:
                "only), quick (2-core CPU on bsp-synth data; costs in each table file), full (the "
                "report's epochs, GPU). Exit codes: 0 done, 1 a run failed or bad data, 2 bad "
                "arguments or runs of another protocol in --out. docs: docs/reproduce.md")
-    p.add_argument("table", metavar="TABLE", nargs="?",
-                   help="table name (installed with bsp_fast) or path to a table YAML")
-    p.add_argument("--table", dest="table_file", metavar="FILE.yaml",
-                   help="your own table file instead of TABLE (docs/reproduce.md, table files)")
+    p.add_argument("table", metavar="TABLE",
+                   help="a table's name (installed with bsp_fast, listed below) or the path "
+                        "to your own table YAML (docs/reproduce.md, table files)")
     p.add_argument("--data", required=True, metavar="DATASET_OR_H5",
                    help="CARLA-BSP dataset directory (e.g. from bsp-synth) or a bsp-convert "
                         "HDF5 file")
@@ -52,8 +53,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: runs)")
     p.add_argument("--rows", metavar="A,B", help="only these rows (comma-separated names)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a bsp-train option for every row (repeatable; YAML values), "
-                        "e.g. --set workers=2 --set accelerator=gpu")
+                   help="override a bsp-train option for every row (repeatable; YAML values; "
+                        "any bsp-train option but "
+                        + ", ".join(n for n in NOT_OVERRIDES if n != "hp") + "), e.g. "
+                        "--set workers=2 --set accelerator=gpu --set max_steps=10")
     p.add_argument("--force", action="store_true",
                    help="train rows again even when their run directory has metrics.json "
                         "(default: reuse finished rows)")
@@ -80,29 +83,48 @@ def build_parser() -> argparse.ArgumentParser:
                         "size or distance bin, profile, missing joints), mean ± std over seeds: "
                         "breakdown.md, breakdown.json and bar figures beside results.md")
     add_options(p)  # --seeds, --split-seeds, --jobs
-    # every bsp-train option (its own declaration, training/config.py) for every row, as
-    # --set KEY=VALUE; given here, it wins over a --set of the same key
-    p.set_defaults(overrides=add_overrides(
-        p, "table", "bsp-train options for every row (like --set KEY=VALUE; default: the "
-        "table's)"))
     return p
+
+
+def parse_set(items) -> dict:
+    """``--set KEY=VALUE`` items as bsp-train options (``-`` or ``_``), each converted by
+    its own declaration; a name that is not an override is refused with a "did you
+    mean"."""
+    allowed = {o.name: o for o in C.OPTIONS if o.name not in NOT_OVERRIDES or o.name == "hp"}
+    out = {}
+    for key, value in C.parse_hp(items).items():
+        if key in NOT_OVERRIDES:
+            raise C.ConfigError(f"--set {key}: not a per-row override; bsp-reproduce sets it "
+                                "itself (the table's rows, --seeds, --data, --out, --force)")
+        if key not in allowed:
+            raise C.ConfigError(f"--set {key}: " + unknown("bsp-train option", key, allowed))
+        try:
+            out[key] = allowed[key].convert(value)
+        except C.ConfigError as exc:
+            raise C.ConfigError(f"--set {key}: {exc}") from None
+    return out
 
 
 def main(argv=None) -> int:
     parser = build_parser()
     ns = parser.parse_args(argv)
-    if (ns.table is None) == (ns.table_file is None):
-        parser.error("give a TABLE name or --table FILE.yaml (one of them)")
     if ns.publish and ns.dry_run:
         parser.error("--publish copies a finished table: not with --dry-run")
-    if ns.table_file is not None and Path(ns.table_file).suffix not in (".yaml", ".yml"):
-        parser.error(f"--table {ns.table_file}: a table file ends in .yaml or .yml")
-    from ..training.lifecycle import Interrupted, signals
+    try:  # every argument and input checked before PyTorch is imported
+        tab = load_table(ns.table)
+        overrides = parse_set(ns.set)
+        if not Path(ns.data).exists():
+            raise RunError(f"--data {ns.data}: no such dataset directory or HDF5 file")
+    except (C.ConfigError, ValueError) as exc:
+        print(f"bsp-reproduce: {exc}", file=sys.stderr)
+        return 2
+    except RunError as exc:
+        print(f"bsp-reproduce: {exc}", file=sys.stderr)
+        return exc.code
+    from ..training.stopping import Interrupted, signals
     from .report import write_report
 
     try:
-        tab = load_table(ns.table or ns.table_file)
-        overrides = {**C.parse_hp(ns.set), **given_overrides(ns, ns.overrides)}
         rows = [r.strip() for r in ns.rows.split(",") if r.strip()] if ns.rows else None
         seeds = None if ns.seeds == 1 and not ns.split_seeds else ns.seeds
         # SIGTERM/SIGINT: Interrupted here; the runs in worker processes get SIGTERM and
@@ -129,7 +151,7 @@ def main(argv=None) -> int:
         return 2
     except RunError as exc:
         print(f"bsp-reproduce: {exc}", file=sys.stderr)
-        return 1
+        return exc.code
     except KeyboardInterrupt:
         print("bsp-reproduce: interrupted (finished rows are kept and reused)", file=sys.stderr)
         return 130

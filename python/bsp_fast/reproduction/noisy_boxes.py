@@ -46,7 +46,7 @@ def noisy_box_metrics(tab: dict, run_dir: Path, force: bool, quiet: bool, log) -
 def _add_per_recording(run_dir: Path, noisy: dict) -> None:
     """Adds the noisy-box sums (``NAME_noisy``) to the run's ``test_per_recording.json``:
     the same test recordings in the same order, or RunError (nothing written)."""
-    from ..training.per_recording import FILE
+    from ..training.runs import PER_RECORDING_FILE as FILE
 
     path = run_dir / FILE
     if not path.is_file():

@@ -22,7 +22,7 @@ from pathlib import Path
 from ..atomic import write_text
 from ..defaults import SEED
 from ..training import config as C
-from ..training.per_recording import FILE as BREAKDOWN
+from ..training.runs import PER_RECORDING_FILE as BREAKDOWN
 from ..training.runs import RunError, read_run, resumable
 from .cost_columns import run_cost
 from .noisy_boxes import noisy_box_metrics
@@ -99,7 +99,7 @@ def _runs(tab, wanted, seeds, budget: str):
 def _convert_once(plan) -> None:
     """Converts each distinct dataset conversion before the parallel runs start (two
     processes must not write the same cache file)."""
-    from ..training.train import make_datamodule, prepare_data
+    from ..training.setup import make_datamodule, prepare_data
 
     done = set()
     for _, _, _, opts in plan:

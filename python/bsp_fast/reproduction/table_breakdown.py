@@ -48,7 +48,7 @@ def _fresh(run_dir: Path, file: Path) -> bool:
 def run_breakdowns(res: dict, force: bool = False, log=print) -> dict:
     """``{row: [document per seed]}``: each run's saved breakdown, computed (and saved)
     where missing or stale."""
-    from ..training.eval_breakdown import FILE
+    from ..training.runs import BREAKDOWN_FILE as FILE
     from ..training.evaluate import breakdown
 
     docs: dict = {}

@@ -16,6 +16,7 @@ import re
 from pathlib import Path
 
 from .. import defaults
+from ..command_line import unknown
 from ..training import config as C
 from .figures import check_figures
 from .protocol import check_deviations, check_exploratory
@@ -95,14 +96,14 @@ def load_table(table) -> dict:
     path = Path(table)
     if path.suffix not in (".yaml", ".yml"):
         if str(table) not in table_names():
-            raise ValueError(f"unknown table {table!r}; allowed: {', '.join(table_names())} "
-                             "(or a path to a table YAML)")
+            raise ValueError(unknown("table", str(table), table_names())
+                             + " (or a path to a table YAML)")
         dirs = experiments_dirs()
         path = next((d / f"{table}.yaml" for d in dirs if (d / f"{table}.yaml").is_file()),
                     None)
         if path is None:
             raise ValueError(f"no table file {table}.yaml in " + ", ".join(map(str, dirs))
-                             + " (a broken install? --table FILE.yaml reads your own)")
+                             + " (a broken install? a path to a table YAML reads your own)")
     if not path.is_file():
         raise ValueError(f"{path}: no such table file")
     doc = yaml.safe_load(path.read_text(encoding="utf-8"))
@@ -259,7 +260,7 @@ def prepare_row_data(table: dict, row: dict, opts: dict, convert: bool = True) -
         return opts
     if want == "mask" or (not convert and not data.is_dir()):
         return opts
-    from ..training.train import make_datamodule, prepare_data
+    from ..training.setup import make_datamodule, prepare_data
 
     dm = make_datamodule(C.defaults() | opts)
     dm.convert_options["crop_box"] = want

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from ..command_line import ArgumentParser
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_EXISTS, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
@@ -17,7 +18,7 @@ def _preset(name: str) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="bsp-synth",
         description="Generate a CARLA-BSP-format dataset (data.csv, clips/<id>-0.mp4 RGB, "
                     "clips/<id>-1.apng segmentation, config.yaml) without a simulator: a "

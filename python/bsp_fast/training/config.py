@@ -23,7 +23,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..data import mix_tables  # mixing tables (no torch)
+from ..command_line import did_you_mean
 from ..defaults import SEED
+from ..models import catalogue  # the registered models, without torch
 from ..option_kinds import KINDS, ConfigError, parse_hp  # value converters, re-exported
 from .tasks import TASKS, get_task  # the task registry (no torch)
 
@@ -70,7 +72,8 @@ class Option:
                     "path": "a string"}.get(self.kind, "a valid value")
             raise ConfigError(f"{self.name} expects {what}, got {value!r}") from None
         if self.choices and value not in self.choices:
-            raise ConfigError(f"{self.name} must be one of {list(self.choices)}, got {value!r}")
+            raise ConfigError(f"{self.name} must be one of {list(self.choices)}, got {value!r}"
+                              + did_you_mean(value, self.choices))
         if self.minimum is not None and value < self.minimum:
             raise ConfigError(f"{self.name} must be >= {self.minimum}, got {value!r}")
         return value
@@ -159,7 +162,8 @@ OPTIONS: tuple = (
     _o("threads", "int", 0, "torch CPU threads per training process (0: torch's default, "
        "the core count); 1 is often fastest for small models or on a busy machine",
        "training", minimum=0, metavar="N", scoring=True),
-    _o("accelerator", "str", "auto", "where to train", "training", choices=ACCELERATORS,
+    _o("accelerator", "str", "auto", "where to run: cpu, gpu, or auto (a GPU when there is "
+       "one)", "training", choices=ACCELERATORS,
        scoring=True),
     _o("devices", "devices", "auto", "number of devices (processes with DDP) or 'auto' or a "
        "comma-separated list of GPU indices", "training"),
@@ -203,7 +207,8 @@ def normalise(values: dict, source: str = "options") -> dict:
     for key, value in values.items():
         name = str(key).replace("-", "_")
         if name not in BY_NAME:
-            raise ConfigError(f"{source}: unknown option {key!r}; allowed: "
+            raise ConfigError(f"{source}: unknown option {key!r}"
+                              f"{did_you_mean(name, BY_NAME)}; allowed: "
                               + ", ".join(o.name for o in OPTIONS))
         out[name] = BY_NAME[name].convert(value)
     return out
@@ -229,12 +234,13 @@ def validate(cfg: dict) -> dict:
     cfg = dict(cfg)
     if cfg.get("task") is None:
         raise ConfigError("no task given; allowed: " + ", ".join(TASKS))
-    from .. import models
-
-    names = models.available(cfg["task"])
+    names = catalogue.names(cfg["task"])  # read from the model modules, without torch
     if cfg.get("model") is None:
         raise ConfigError(f"no model given for task {cfg['task']!r}; allowed: "
                           + ", ".join(names))
+    if cfg["model"] not in names:
+        raise ConfigError(f"unknown model {cfg['model']!r} for task {cfg['task']!r}"
+                          f"{did_you_mean(cfg['model'], names)}; allowed: {', '.join(names)}")
     if cfg.get("mix") is not None or cfg.get("mix_data") or cfg.get("test_on"):
         cfg = mix_tables.check_run(cfg, error=ConfigError)  # may set data: the first file
     if cfg.get("data") is None:
@@ -247,14 +253,12 @@ def validate(cfg: dict) -> dict:
         raise ConfigError(str(exc)) from None
     if get_task(cfg["task"]).image_inputs and (cfg["noise"] or cfg["mjp"]):
         raise ConfigError(f"noise/mjp deform 2D joint inputs; {cfg['task']} reads images")
-    if cfg["model"] not in names:
-        raise ConfigError(f"unknown model {cfg['model']!r} for task {cfg['task']!r}; "
-                          f"allowed: {', '.join(names)}")
-    allowed = models.hparams_of(cfg["task"], cfg["model"])
-    unknown = sorted(set(cfg["hp"]) - set(allowed))
-    if unknown:
-        raise ConfigError(f"model {cfg['model']!r} has no hyper-parameter(s) {unknown}; "
-                          f"allowed: {', '.join(f'{k}={v!r}' for k, v in allowed.items())}")
+    allowed = catalogue.hparams(cfg["task"], cfg["model"])
+    bad = sorted(set(cfg["hp"]) - set(allowed))
+    if bad:
+        raise ConfigError(f"model {cfg['model']!r} has no hyper-parameter {bad[0]!r}"
+                          f"{did_you_mean(bad[0], allowed)}; allowed: "
+                          f"{', '.join(f'{k}={v!r}' for k, v in allowed.items())}")
     return cfg
 
 

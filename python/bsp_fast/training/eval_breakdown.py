@@ -1,7 +1,7 @@
 """Where a run's test error lies: per joint, per pedestrian size or distance, per profile,
 per realised missing-joint count (``bsp-eval RUN --breakdown``, docs/training.md).
 
-:class:`BreakdownCollector` is a Lightning callback: during ``trainer.test`` it keeps, for
+:class:`BreakdownCollector` observes the scorer (:mod:`.scorer`): as the test split is scored it keeps, for
 every scored frame (clip, for classification), what the task's metric is made of, taken
 from the same arrays the task scores (``Lifting.metres``, ``pose_pairs`` of the 2D tasks,
 the classifier's logits). :func:`build_breakdown` then reads what the batches do not hold
@@ -37,17 +37,17 @@ import math
 
 import numpy as np
 import torch
-from lightning.pytorch.callbacks import Callback
 
 from .. import metrics as M
 from ..metrics import ranking
 from ..skeleton import HIPS, JOINT_NAMES, NUM_JOINTS
+from .runs import BREAKDOWN_FILE
 from .tasks import get_task
 
 __all__ = ["BreakdownCollector", "build_breakdown", "bin_index", "FILE", "HEIGHT_EDGES_PX",
            "DISTANCE_EDGES_M", "MISSING_BINS", "PCK_ALPHA", "TTE_BINS", "CLS_COLUMNS"]
 
-FILE = "test_breakdown.json"
+FILE = BREAKDOWN_FILE
 HEIGHT_EDGES_PX = (0.0, 50.0, 100.0, 200.0, 400.0, math.inf)
 DISTANCE_EDGES_M = (0.0, 10.0, 20.0, 30.0, 50.0, math.inf)
 #: inclusive ranges of missing joints per frame
@@ -63,25 +63,20 @@ CLS_COLUMNS = {"f1": "F1", "precision": "precision", "recall": "recall",
 SCORES = ("logits", "joint_error_mm", "pose_pairs")
 
 
-class BreakdownCollector(Callback):
+class BreakdownCollector:
     """Keeps each test batch's scored arrays (as NumPy, on the CPU) in ``parts``; the
     model's parameter count and forward FLOPs per clip (first batch) in ``cost``; the
     test split's file in ``h5_path``."""
 
     def __init__(self):
-        super().__init__()
         self.parts: list = []
         self.cost: dict = {}
         self.h5_path = None
 
     @torch.no_grad()
-    def on_test_batch_end(self, trainer, pl_module, outputs, batch, batch_idx,
-                          dataloader_idx=0):
-        if outputs is None:
-            raise RuntimeError("the module's test_step returned no output; "
-                               "--breakdown needs a bsp_fast TaskModule")
-        spec, net = pl_module.spec, pl_module.net
-        out = outputs.detach().float()
+    def update(self, spec, net, output, batch) -> None:
+        """One scored test batch (:func:`bsp_fast.training.scorer.score`'s observer)."""
+        out = output.detach().float()
         if not self.cost:
             from ..models.cost import flops_per_clip, parameter_count
 
@@ -117,11 +112,6 @@ class BreakdownCollector(Callback):
             vis = batch["visible"][:, sl].bool()
             part["missing"] = (~vis).sum(-1).cpu().numpy()  # (B, Ls)
         self.parts.append(part)
-
-    def on_test_end(self, trainer, pl_module):
-        dm = trainer.datamodule
-        if dm is not None and "test" in getattr(dm, "datasets", {}):
-            self.h5_path = str(dm.datasets["test"].h5_path)
 
 
 # ---------------------------------------------------------------------- clip-file values

@@ -12,7 +12,9 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..command_line import ArgumentParser, HelpFormatter
 from . import config as C
+from .._plain_progress import FALLBACK_NOTE, readable
 from .overrides import add_overrides, given_overrides
 from ..atomic import OutputOverlapError, refuse
 from .runs import RunError, check_run_outputs, open_run, resolve_checkpoint, run_inputs, \
@@ -40,13 +42,12 @@ class EvalResult:
 
 
 def load_run(run, which: str = "best", data=None, **overrides):
-    """``(module, cfg, ckpt, h5)`` of a run directory or checkpoint: the rebuilt module, its
+    """``(saved, cfg, ckpt, h5)`` of a run directory or checkpoint: the rebuilt net
+    (:class:`~bsp_fast.training.scorer.SavedModel`), its
     saved config with ``overrides`` (bsp-train option names) applied, and the data to read
     (``data``, else the run's dataset folder if it still exists, so its conversion is
     compared with its data.csv, else the HDF5 file the run used if it still exists, else
     its ``data``)."""
-    from .module import load_module
-
     opened = open_run(run, which)
     ckpt, run_dir, info = opened["ckpt"], opened["run_dir"], opened["info"]
     cfg = C.defaults()
@@ -74,12 +75,16 @@ def load_run(run, which: str = "best", data=None, **overrides):
             h5 = used
     if cfg.get("data") is None and h5 is None:
         raise RunError(f"{ckpt}: the checkpoint names no data; pass --data")
-    module = load_module(ckpt)
-    module.eval()
-    return module, cfg, ckpt, h5
+    from .scorer import load_saved  # torch: once the run is known to exist
+
+    try:
+        saved = load_saved(ckpt)
+    except ValueError as exc:
+        raise RunError(str(exc)) from None
+    return saved, cfg, ckpt, h5
 
 
-def prepare_scoring(cfg: dict, module) -> str:
+def prepare_scoring(cfg: dict, saved) -> str:
     """Sets the run's ``threads`` (``torch.set_num_threads``, when given) and returns the
     Trainer precision ``bsp-eval`` scores it in and ``bsp-predict`` predicts in (so the
     predictions are the outputs that were scored): the run's ``precision`` (``auto``
@@ -91,7 +96,7 @@ def prepare_scoring(cfg: dict, module) -> str:
         import torch
 
         torch.set_num_threads(cfg["threads"])
-    precision = resolve_precision(cfg["precision"], cfg["accelerator"], module.net)
+    precision = resolve_precision(cfg["precision"], cfg["accelerator"], saved.net)
     if precision.startswith("bf16") and not native_bf16(cfg["accelerator"]):
         precision = "32"
     return precision
@@ -101,72 +106,44 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
              batch_size: int | None = None, workers: int | None = None,
              accelerator: str | None = None, noise: float | None = None, mjp=None,
              limit_batches: int | None = None, quiet: bool = True,
-             box_noise=None, callbacks=(), **overrides) -> EvalResult:
+             box_noise=None, observers=(), **overrides) -> EvalResult:
     """Scores the ``which`` checkpoint (best or last) of run directory or checkpoint
     ``run`` on ``split`` (test or val) with the run's data settings (the evaluation noise
-    is fixed per clip), any of them overridable; reproduces the run's
-    ``metrics.json``. Every clip of the split is scored whatever ``batch_size`` (the run's
+    is fixed per clip), any of them overridable; reproduces the run's ``metrics.json``
+    (the same steps and precision as its ``Trainer.test``, in plain PyTorch:
+    :mod:`.scorer`). Every clip of the split is scored whatever ``batch_size`` (the run's
     ``limit_batches`` is not carried over; ``limit_batches`` here limits on purpose), and
-    the result counts the clips and recordings scored. ``box_noise=(scale, shift)`` (pose_estimation) scores the crops of
-    noisy boxes instead: side x U[1 - scale, 1 + scale], centre moved by U[-shift, shift]
-    x side per axis, fixed per clip by the evaluation seed (docs/data.md, "Box noise").
-    ``callbacks``: more Lightning callbacks for the evaluation Trainer."""
+    the result counts the clips and recordings scored. ``box_noise=(scale, shift)``
+    (pose_estimation) scores the crops of noisy boxes instead: side x U[1 - scale,
+    1 + scale], centre moved by U[-shift, shift] x side per axis, fixed per clip by the
+    evaluation seed (docs/data.md, "Box noise"). ``observers``: objects whose
+    ``update(spec, net, output, batch)`` sees every scored batch."""
     if split not in SPLIT_STAGES:
         raise ValueError(f"split must be one of {list(SPLIT_STAGES)}, got {split!r}")
-    from .train import make_datamodule, make_trainer, prepare_data
+    saved, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size, workers=workers,
+                                    accelerator=accelerator, noise=noise, mjp=mjp,
+                                    quiet=quiet, **overrides)
+    from .scorer import device_of, score
+    from .setup import make_datamodule, prepare_data
 
-    module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size, workers=workers,
-                                     accelerator=accelerator, noise=noise, mjp=mjp,
-                                     quiet=quiet, **overrides)
-    cfg["limit_batches"] = limit_batches or 0  # the whole split unless asked here
-    precision = prepare_scoring(cfg, module)
-    dm = make_datamodule(cfg, h5)
+    precision = prepare_scoring(cfg, saved)
+    dm = make_datamodule(cfg, h5, plain=cfg.get("mix") is None)
     if box_noise is not None:
-        if module.task != "pose_estimation":
+        if saved.task != "pose_estimation":
             raise ValueError(f"box noise perturbs pose-estimation crop boxes; this is a "
-                             f"{module.task} run")
+                             f"{saved.task} run")
         dm.dataset_options["box_noise"] = tuple(float(x) for x in box_noise)
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
-    counter = scored_clips_callback()
-    trainer = make_trainer(cfg, None, precision, fit=False,
-                           callbacks=[counter, *callbacks])
-    if split == "test":
-        trainer.test(module, datamodule=dm, verbose=False)
-    else:
-        trainer.validate(module, datamodule=dm, verbose=False)
-    metrics = dict(module.results.get(split, {}))
-    return EvalResult(task=module.task, model=module.hparams["model"], split=split,
-                      metrics=metrics, checkpoint=Path(ckpt), config=cfg,
-                      clips=counter.clips, recordings=len(counter.recordings),
-                      per_recording=module.results.get("test_per_recording")
-                      if split == "test" else None)
-
-
-def scored_clips_callback():
-    """A Lightning callback counting the clips and recordings (``video_id/pedestrian_id``)
-    that validation or test batches carried, so a command can say what it scored."""
-    import lightning.pytorch as pl
-
-    from .per_recording import recording_ids
-
-    class _ScoredClips(pl.Callback):
-        def __init__(self):
-            self.clips, self.recordings = 0, set()
-
-        def _count(self, batch) -> None:
-            meta = batch["meta"]
-            self.clips += len(meta["index"])
-            self.recordings.update(recording_ids(meta))
-
-        def on_test_batch_end(self, trainer, module, outputs, batch, batch_idx,
-                              dataloader_idx=0):
-            self._count(batch)
-
-        def on_validation_batch_end(self, trainer, module, outputs, batch, batch_idx,
-                                    dataloader_idx=0):
-            self._count(batch)
-
-    return _ScoredClips()
+    for observer in observers:  # e.g. the breakdown reads what batches lack from the file
+        observer.h5_path = str(dm.datasets[split].h5_path)
+    loader = dm.test_dataloader() if split == "test" else dm.val_dataloader()
+    res = score(saved, loader, precision, device_of(cfg["accelerator"]),
+                per_recording=split == "test", observers=observers,
+                limit=limit_batches or 0, progress=not quiet)
+    return EvalResult(task=saved.task, model=saved.model, split=split,
+                      metrics=res["metrics"], checkpoint=Path(ckpt), config=cfg,
+                      clips=res["clips"], recordings=res["recordings"],
+                      per_recording=res["per_recording"])
 
 
 def breakdown(run, data=None, *, which: str = "best", save: bool = False, **options) -> dict:
@@ -177,7 +154,8 @@ def breakdown(run, data=None, *, which: str = "best", save: bool = False, **opti
     ``checkpoint``, ``model`` and the run's overall ``metrics``. ``save=True`` also
     writes it to ``RUN/test_breakdown.json`` (a run directory is needed)."""
     from .breakdown_format import to_json
-    from .eval_breakdown import FILE, BreakdownCollector, build_breakdown
+    from .eval_breakdown import BreakdownCollector, build_breakdown
+    from .runs import BREAKDOWN_FILE as FILE
 
     run_dir = None
     if save:
@@ -186,7 +164,7 @@ def breakdown(run, data=None, *, which: str = "best", save: bool = False, **opti
             raise RunError(f"{run}: --save writes {FILE} into a run directory; this "
                            "checkpoint has none")
     collector = BreakdownCollector()
-    res = evaluate(run, "test", data, which=which, callbacks=[collector], **options)
+    res = evaluate(run, "test", data, which=which, observers=[collector], **options)
     doc = build_breakdown(collector, res.task, res.metrics)
     doc.update(model=res.model, checkpoint=str(res.checkpoint))
     if save:
@@ -208,13 +186,13 @@ def _box_noise(text: str) -> tuple:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="bsp-eval",
         description="Re-evaluate a bsp-train checkpoint (bsp-eval RUN_OR_CKPT), or print "
                     "runs side by side in the report's table layout (bsp-eval --table "
                     "RUN...), with the initial-metrics row of the trivial baseline.",
         epilog="exit codes: 0 success, 1 bad data/run/checkpoint, 2 bad arguments. "
-               "docs: docs/training.md", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+               "docs: docs/training.md", formatter_class=HelpFormatter)
     p.add_argument("runs", nargs="+", metavar="RUN_OR_CKPT",
                    help="a run directory or .ckpt (several with --table)")
     p.add_argument("--table", action="store_true",
@@ -284,8 +262,11 @@ def main(argv=None) -> int:
     print(f"  scored {res.clips} clips of {res.recordings} recordings"
           + (f" (--limit-batches {args.limit_batches})"
              if getattr(args, "limit_batches", None) else ""))
-    for key, value in res.metrics.items():
+    shown = readable(res.metrics)
+    for key, value in shown.items():
         print(f"  {key:14s} {value:.6g}")
+    if "normaliser_fallback" in shown:
+        print(f"  ({FALLBACK_NOTE})")
     return 0
 
 
@@ -293,7 +274,7 @@ def _check_outputs(args) -> None:
     """The output rule (bsp_fast.atomic.check_outputs), before the run is loaded: --json
     (and, with --breakdown --save, RUN/test_breakdown.json) is none of the run's inputs
     (the run directory, its checkpoint and config.yaml, the data), nor each other."""
-    from .eval_breakdown import FILE
+    from .runs import BREAKDOWN_FILE as FILE
 
     outputs = [("--json", args.json)]
     if args.breakdown and args.save:

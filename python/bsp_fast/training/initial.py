@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import torch
 
+from .._plain_progress import readable
 from .per_recording import RecordingBreakdown
 from .scoring import TaskMetrics
 from .tasks import get_task
@@ -58,6 +59,6 @@ def log_initial(trainer, initial: dict, quiet: bool) -> None:
     if not quiet:
         print(f"initial metrics ({initial['baseline']}, before training):")
         for split in ("val", "test"):
-            row = ", ".join(f"{k} {v:.4g}" for k, v in initial.get(split, {}).items()
+            row = ", ".join(f"{k} {v:.4g}" for k, v in readable(initial.get(split, {})).items()
                             if v is not None)
             print(f"  {split}: {row}")

@@ -18,7 +18,6 @@
 """
 from __future__ import annotations
 
-import contextlib
 import io
 import random
 import signal
@@ -32,34 +31,11 @@ from lightning.fabric.plugins.io.torch_io import TorchCheckpointIO
 from lightning.pytorch.callbacks import Callback
 
 from ..atomic import write_bytes
-from .config import parse_duration  # re-exported: the option's parser
-from .checkpointing import epoch_end_as_completed
+from .checkpoint_file import epoch_end_as_completed
 from .runs import write_marker
+from .stopping import CheckpointWriteError, Interrupted, Signals
 
-__all__ = ["Interrupted", "OutputWriteError", "CheckpointWriteError", "AtomicCheckpointIO",
-           "Lifecycle", "signals", "parse_duration", "epochs_note", "test_checkpoint"]
-
-_EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}
-
-
-class Interrupted(BaseException):
-    """SIGINT or SIGTERM stopped the run (a BaseException: no ``except Exception`` of
-    Lightning or ours swallows it). ``code``: the exit status, 128 + the signal."""
-
-    def __init__(self, signum: int):
-        self.signum = int(signum)
-        self.code = _EXIT.get(self.signum, 128 + self.signum)
-        super().__init__(signal.Signals(self.signum).name)
-
-
-class OutputWriteError(OSError):
-    """A run's file could not be written (full disk, read-only or vanished folder); the
-    message names the file and says what is intact."""
-
-
-class CheckpointWriteError(OutputWriteError):
-    """A checkpoint could not be written; the previous one is intact."""
-
+__all__ = ["AtomicCheckpointIO", "Lifecycle", "epochs_note", "test_checkpoint"]
 
 class AtomicCheckpointIO(TorchCheckpointIO):
     """Lightning's checkpoint writer through bsp_fast's one temp-then-rename helper; a
@@ -79,52 +55,6 @@ class AtomicCheckpointIO(TorchCheckpointIO):
             raise CheckpointWriteError(exc.errno, f"{path}: cannot save the checkpoint "
                                        f"({exc.strerror or exc}); the previous one is "
                                        "intact") from None
-
-
-# ---------------------------------------------------------------------- signals
-class _Signals:
-    """SIGINT/SIGTERM: raise :class:`Interrupted` at once, or, while ``deferred`` (the
-    training loop runs), remember the first one for :class:`Lifecycle` to act on at the end
-    of the batch; a second SIGINT stops at once."""
-
-    def __init__(self):
-        self.received: int | None = None
-        self.deferred = False
-
-    def handler(self, signum, frame):
-        if self.deferred and self.received is None:
-            self.received = signum
-            return
-        if self.deferred and signum == signal.SIGTERM:
-            return  # already stopping at the end of this batch
-        raise Interrupted(signum)
-
-    def install(self) -> None:
-        import threading
-
-        if threading.current_thread() is not threading.main_thread():
-            return  # signal handlers can only be set from the main thread
-        for s in _EXIT:
-            signal.signal(s, self.handler)
-
-
-@contextlib.contextmanager
-def signals():
-    """``with signals() as sig:`` SIGINT and SIGTERM raise :class:`Interrupted` (or are
-    deferred, see :class:`Lifecycle`); the previous handlers come back after."""
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        yield _Signals()  # signal handlers can only be set from the main thread
-        return
-    old = {s: signal.getsignal(s) for s in _EXIT}
-    sig = _Signals()
-    sig.install()
-    try:
-        yield sig
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
 
 
 # ---------------------------------------------------------------------- the callback
@@ -149,10 +79,10 @@ class Lifecycle(Callback):
     a run resumed mid-epoch (see the module docstring).
 
     ``run_dir``: the run's (temporary) directory; ``every``: seconds between checkpoints
-    (0: at every epoch end and never within one); ``sig``: the :func:`signals` state;
+    (0: at every epoch end and never within one); ``sig``: the :func:`.stopping.signals` state;
     ``marker``: fields written into ``incomplete.json`` with every save."""
 
-    def __init__(self, run_dir, every: float, sig: _Signals, marker: dict | None = None):
+    def __init__(self, run_dir, every: float, sig: Signals, marker: dict | None = None):
         self.run_dir, self.every, self.sig = Path(run_dir), float(every), sig
         self.marker = dict(marker or {})
         self.epoch, self.batches_done, self.step = 0, 0, 0

@@ -18,16 +18,12 @@ from pathlib import Path
 import lightning.pytorch as pl
 import torch
 
-from .checkpointing import checkpoint_info  # noqa: F401  (public here too: the modules' loader)
-from .scoring import TaskMetrics
+from .checkpoint_file import checkpoint_info
+from .scoring import TaskMetrics, eval_step, prediction_step
 from .tasks import TASKS, get_task
 
 __all__ = ["TaskModule", "ClassificationTask", "AutoencoderTask", "LiftingTask",
-           "PoseEstimationTask", "TASK_MODULES", "load_module", "checkpoint_info",
-           "PREDICTION_STRINGS"]
-
-#: per-clip strings ``predict_step`` returns besides the arrays
-PREDICTION_STRINGS = ("video_id", "pedestrian_id", "age", "gender")
+           "PoseEstimationTask", "TASK_MODULES", "load_module"]
 
 
 class TaskModule(pl.LightningModule):
@@ -95,36 +91,19 @@ class TaskModule(pl.LightningModule):
                      on_epoch=False, batch_size=n)
         return loss
 
-    def _eval_step(self, batch: dict, metrics: TaskMetrics) -> torch.Tensor:
-        self.spec.check_batch(batch)
-        output = self.net.forward_batch(batch)
-        metrics.update_loss(self.net.loss(output, batch), self.spec.batch_size(batch))
-        metrics.update(output, batch, self.net)
-        return output
-
     def validation_step(self, batch: dict, batch_idx: int) -> None:
-        self._eval_step(batch, self.val_metrics)
+        eval_step(self.spec, self.net, batch, self.val_metrics)
 
     def test_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
         """Scores one test batch; returns the model's output (callbacks such as
         ``bsp-eval --breakdown``'s receive it in ``on_test_batch_end``)."""
-        output = self._eval_step(batch, self.test_metrics)
+        output = eval_step(self.spec, self.net, batch, self.test_metrics)
         self.test_recordings.update(output.detach().float(), batch, self.net)
         return output.detach()
 
     def predict_step(self, batch: dict, batch_idx: int) -> dict:
-        """The de-normalised outputs of one batch (tensors; the datasets of
-        ``bsp-predict``): the task's arrays, ``frames``, ``clip_id``, ``row``,
-        ``start_frame``, ``label``, and lists of the clips' ``video_id``,
-        ``pedestrian_id``, ``age``, ``gender``."""
-        self.spec.check_batch(batch)
-        output = self.net.forward_batch(batch).detach().float()
-        out = self.spec.predictions(output, batch, self.net)
-        meta = batch["meta"]
-        out.update(clip_id=meta["clip_id"], row=meta["row"], start_frame=meta["start_frame"],
-                   label=batch["label"])
-        out.update({k: list(meta[k]) for k in PREDICTION_STRINGS})
-        return out
+        """The de-normalised outputs of one batch (:func:`.scoring.prediction_step`)."""
+        return prediction_step(self.spec, self.net, batch)
 
     # ------------------------------------------------------------------ epoch ends
     def _log_metrics(self, prefix: str, metrics: TaskMetrics) -> None:

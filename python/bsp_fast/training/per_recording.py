@@ -29,12 +29,13 @@ from __future__ import annotations
 
 import torch
 
+from .runs import PER_RECORDING_FILE
 from .scoring import TaskMetrics
 
 __all__ = ["FILE", "RecordingBreakdown", "recording_ids", "ratio_terms", "write_breakdown",
            "EMPTY", "CLIP_FIELDS", "pooled_clips"]
 
-FILE = "test_per_recording.json"
+FILE = PER_RECORDING_FILE
 #: what each clip of a section's ``clips`` holds, in order
 CLIP_FIELDS = ("score", "label", "tte")
 #: value of a classification score with nothing to count (as ``scores_from_counts``)

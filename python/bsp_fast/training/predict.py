@@ -7,8 +7,8 @@ Written datasets (N clips, L' = the frames the model predicts, see ``frame_start
 * every task: ``clip_id``, ``row`` (row in the source split), ``start_frame``, ``label``,
   ``frames (N, L')``, ``video_id``, ``pedestrian_id``, ``age``, ``gender`` (strings);
   what each task adds is its task object's ``predictions`` (``bsp_fast.training.tasks``),
-  returned by the LightningModule's ``predict_step`` and written by Lightning's
-  ``trainer.predict`` through a ``BasePredictionWriter``:
+  returned by :func:`.scoring.prediction_step` (the LightningModule's ``predict_step``
+  too), batch by batch in plain PyTorch (:mod:`.scorer`):
 * classification: ``logits``, ``probability`` (of crossing), ``prediction`` (0/1);
 * autoencoder: ``pixels (N, L', 26, 2)`` de-normalised with the *input's* hips/neck
   normalisation (no ground truth used), ``pixels_scored`` (with the clean target's, as
@@ -22,7 +22,6 @@ Written datasets (N clips, L' = the frames the model predicts, see ``frame_start
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..command_line import ArgumentParser, HelpFormatter
 from . import config as C
 from .overrides import add_overrides, given_overrides
 from ..atomic import OutputOverlapError, atomic_output, refuse
@@ -55,55 +55,43 @@ def _np(t):
     return t.detach().float().cpu().numpy() if t.is_floating_point() else t.detach().cpu().numpy()
 
 
-def _writer(out: Path, force: bool, attrs: dict):
-    """Lightning's ``BasePredictionWriter`` that gathers ``predict_step``'s arrays batch
-    by batch and writes them to ``out`` at the end (temporary name, then renamed)."""
+def _write(out: Path, force: bool, parts: dict, attrs: dict) -> None:
+    """Writes the gathered arrays to ``out`` (temporary name, then renamed)."""
     import h5py
-    from lightning.pytorch.callbacks import BasePredictionWriter
 
-    class H5PredictionWriter(BasePredictionWriter):
-        def __init__(self):
-            super().__init__(write_interval="batch")
-            self.parts: dict = {}
-
-        def write_on_batch_end(self, trainer, pl_module, prediction, batch_indices, batch,
-                               batch_idx, dataloader_idx=0):
-            for k, v in prediction.items():
-                self.parts.setdefault(k, []).append(_np(v))
-
-        def on_predict_epoch_end(self, trainer, pl_module):
-            out.parent.mkdir(parents=True, exist_ok=True)
-            with atomic_output(out, force=force) as tmp, h5py.File(tmp, "w") as f:
-                for k, v in self.parts.items():
-                    if isinstance(v[0], list):  # per-clip strings
-                        data = np.array(sum(v, []), dtype=h5py.string_dtype())
-                    else:
-                        data = np.concatenate(v)
-                    f.create_dataset(k, data=data)
-                f.attrs.update(attrs)
-
-    return H5PredictionWriter()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_output(out, force=force) as tmp, h5py.File(tmp, "w") as f:
+        for k, v in parts.items():
+            if isinstance(v[0], list):  # per-clip strings
+                data = np.array(sum(v, []), dtype=h5py.string_dtype())
+            else:
+                data = np.concatenate(v)
+            f.create_dataset(k, data=data)
+        f.attrs.update(attrs)
 
 
-def _progress_bar():
-    """bsp-train's progress style, on stderr (stdout keeps only the summary line):
-    Lightning's bar on a terminal, plain lines in a log file or a pipe (no bar redrawn
-    with carriage returns)."""
-    from lightning.pytorch.callbacks import TQDMProgressBar
-    from lightning.pytorch.callbacks.progress.tqdm_progress import Tqdm
+def _check_out(out: Path, inputs, force: bool) -> Path:
+    """Before any work: ``out`` is a file name, none of the inputs predictions are made
+    from (through links too), and new unless ``force``."""
+    if out.is_dir():
+        raise RunError(f"{out} is a folder; the predictions are one HDF5 file (give a "
+                       "file name, e.g. predictions.h5)", code=2)
+    check_run_outputs(inputs, [("--out", out)])
+    if out.exists() and not force:
+        raise RunError(f"{out} exists; pass --force to overwrite it", code=3)
+    return out
 
-    from .progress import PlainProgress, is_terminal
 
-    if not is_terminal(sys.stderr):
-        return PlainProgress()
-
-    class StderrBar(TQDMProgressBar):
-        def init_predict_tqdm(self):
-            return Tqdm(desc=self.predict_description, position=2 * self.process_position,
-                        leave=True, dynamic_ncols=True, file=sys.stderr, smoothing=0,
-                        bar_format=self.BAR_FORMAT)
-
-    return StderrBar()
+def _attrs(saved, ckpt, source, split: str, L: int) -> dict:
+    """The file's attributes: what was predicted, from what, and which frames."""
+    sl = saved.scored_frames(L)
+    attrs = {"created_by": "bsp-predict", "task": saved.task, "model": saved.model,
+             "checkpoint": str(ckpt), "source": str(source), "split": split,
+             "frame_start": sl.start or 0, "frame_stop": sl.stop or L, "clip_length": L,
+             "hparams_json": json.dumps(saved.hparams["hparams"], default=str)}
+    if saved.spec.prediction_units:  # classification's logits have no unit
+        attrs["units"] = saved.spec.prediction_units
+    return attrs
 
 
 def predict(run, out, data=None, *, split: str = "test", which: str = "best",
@@ -116,78 +104,63 @@ def predict(run, out, data=None, *, split: str = "test", which: str = "best",
     accelerator unless given, precision, threads, and the per-clip evaluation noise, which
     no batch size changes), over every clip of the split, so the predictions are the
     outputs that were scored."""
-    import warnings
-
-    import torch
-
     from .evaluate import SPLIT_STAGES, load_run, prepare_scoring
-    from .train import make_datamodule, make_trainer, prepare_data
 
     if split not in SPLIT_STAGES:
         raise ValueError(f"split must be one of {list(SPLIT_STAGES)}, got {split!r}")
     if accelerator is not None and accelerator not in C.ACCELERATORS:
         raise ValueError(f"accelerator must be one of {list(C.ACCELERATORS)}, got "
                          f"{accelerator!r}")
-    out = Path(out)
-    if out.is_dir():
-        raise RunError(f"{out} is a folder; the predictions are one HDF5 file (give a "
-                       "file name, e.g. predictions.h5)", code=2)
-    # before any work: never overwrite what predictions are made from, through links too
-    check_run_outputs(run_inputs(run, which, data), [("--out", out)])
-    if out.exists() and not force:
-        raise RunError(f"{out} exists; pass --force to overwrite it", code=3)
-    module, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size,
-                                     workers=workers, accelerator=accelerator, noise=noise,
-                                     mjp=mjp, **overrides)
+    out = _check_out(Path(out), run_inputs(run, which, data), force)
+    saved, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size,
+                                    workers=workers, accelerator=accelerator, noise=noise,
+                                    mjp=mjp, **overrides)
+    import torch
+
+    from .scorer import device_of, predict_batches
+    from .setup import make_datamodule, prepare_data
+
     if cfg["accelerator"] == "gpu" and not torch.cuda.is_available():
         raise C.ConfigError("--accelerator gpu: no CUDA device available" if accelerator else
                             f"{ckpt}: the run used --accelerator gpu and no CUDA device is "
                             "available here; pass --accelerator cpu")
-    precision = prepare_scoring(cfg, module)
-    dm = make_datamodule(cfg, h5)
+    precision = prepare_scoring(cfg, saved)
+    dm = make_datamodule(cfg, h5, plain=cfg.get("mix") is None)
     # again, with what loading the run resolved (the saved config's data, its HDF5 file)
     check_run_outputs([ckpt, h5, dm.h5_path, cfg.get("data")], [("--out", out)])
     prepare_data(dm, stages=(SPLIT_STAGES[split],))
     loader = dm.test_dataloader() if split == "test" else dm.val_dataloader()
-    L = dm.datasets[split].clip_length
-    sl = module.scored_frames(L)
-    task = module.task
-    attrs = {"created_by": "bsp-predict", "task": task, "model": module.hparams["model"],
-             "checkpoint": str(ckpt), "source": str(dm.h5_path), "split": split,
-             "frame_start": sl.start or 0, "frame_stop": sl.stop or L, "clip_length": L,
-             "hparams_json": json.dumps(module.hparams["hparams"], default=str),
-             "units": module.spec.prediction_units}
-    writer = _writer(out, force, attrs)
+    attrs = _attrs(saved, ckpt, dm.h5_path, split, dm.datasets[split].clip_length)
+    parts: dict = {}
     # the precision bsp-eval scores in; the whole split, whatever the run's --limit-batches
-    limit = overrides.get("limit_batches") or 0  # the whole split unless asked here
-    trainer = make_trainer(dict(cfg, quiet=not progress, limit_batches=limit), None, precision,
-                           fit=False,
-                           callbacks=[writer] + ([_progress_bar()] if progress else []))
-    # the writer needs no sampler indices (the clips carry their row)
-    warnings.filterwarnings("ignore", message=r".*infer the batch indices.*")
-    trainer.predict(module, dataloaders=loader, return_predictions=False)
-    n = int(sum(len(v) for v in writer.parts["label"]))
-    recs = {(v, p) for vs, ps in zip(writer.parts.get("video_id", []),
-                                     writer.parts.get("pedestrian_id", []))
+    for step in predict_batches(saved, loader, precision, device_of(cfg["accelerator"]),
+                                limit=overrides.get("limit_batches") or 0,
+                                progress=progress):
+        for k, v in step.items():
+            parts.setdefault(k, []).append(_np(v))
+    _write(out, force, parts, attrs)
+    recs = {(v, p) for vs, ps in zip(parts.get("video_id", []), parts.get("pedestrian_id", []))
             for v, p in zip(vs, ps)}
-    return PredictResult(path=out, task=task, model=module.hparams["model"], split=split,
-                         clips=n, datasets=sorted(writer.parts), recordings=len(recs))
+    return PredictResult(path=out, task=saved.task, model=saved.model, split=split,
+                         clips=int(sum(len(v) for v in parts["label"])),
+                         datasets=sorted(parts), recordings=len(recs))
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="bsp-predict",
         description="Write a bsp-train model's de-normalised outputs (pixels or metres) for "
                     "one split, with clip ids, to an HDF5 file.",
         epilog="exit codes: 0 success, 1 bad data/run/checkpoint, 2 bad arguments (or --out "
                "is one of the inputs, --force or not), 3 output exists (use --force). docs: "
                "docs/training.md",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        formatter_class=HelpFormatter)
     p.add_argument("run", metavar="RUN_OR_CKPT", help="run directory or .ckpt")
     p.add_argument("--out", required=True, metavar="PREDS.h5", help="HDF5 file to write")
     p.add_argument("--data", default=None, metavar="DATASET_OR_H5",
                    help="data to predict on (default: the run's)")
-    p.add_argument("--split", default="test", choices=("test", "val"))
+    p.add_argument("--split", default="test", choices=("test", "val"),
+                   help="split of the data to predict")
     p.add_argument("--which", default="best", choices=("best", "last"),
                    help="checkpoint of a run directory")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")

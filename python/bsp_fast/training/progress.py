@@ -9,7 +9,7 @@ import time
 from lightning.pytorch.callbacks import TQDMProgressBar
 from lightning.pytorch.callbacks.progress.progress_bar import ProgressBar
 
-from .._plain_progress import INTERVAL, is_terminal, stamp
+from .._plain_progress import INTERVAL, is_terminal, readable, stamp
 
 __all__ = ["PlainProgress", "progress_callbacks", "is_terminal", "INTERVAL"]
 
@@ -86,7 +86,7 @@ class PlainProgress(ProgressBar):
         shown = {k: float(v) for k, v in trainer.callback_metrics.items()
                  if k.startswith(prefixes) and k.count("/") == 1
                  and not k.endswith("_step") and getattr(v, "numel", lambda: 1)() == 1}
-        values = ", ".join(f"{k} {v:.4g}" for k, v in sorted(shown.items()))
+        values = ", ".join(f"{k} {v:.4g}" for k, v in sorted(readable(shown).items()))
         self._last = time.perf_counter()
         self._say(f"{self._pending} done" + (f": {values}" if values else ""))
         self._pending, self._validated = None, False

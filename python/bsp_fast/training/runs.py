@@ -31,6 +31,10 @@ ENV_TMP = "BSP_FAST_RUN_TMP"
 #: The file that marks a run directory as incomplete (being written, interrupted or
 #: killed): it holds the epoch and step of the last checkpoint; a finished run has none.
 MARKER = "incomplete.json"
+#: the test split's sums per recording (training/per_recording.py writes it)
+PER_RECORDING_FILE = "test_per_recording.json"
+#: bsp-eval --breakdown --save's tables (training/eval_breakdown.py)
+BREAKDOWN_FILE = "test_breakdown.json"
 
 
 class RunError(Exception):
@@ -393,7 +397,7 @@ def open_run(run, which: str = "best", what: str = "") -> dict:
         raise ValueError(f"which must be one of ['best', 'last'], got {which!r}")
     ckpt, run_dir = resolve_checkpoint(run, which)
     try:  # truncated, foreign or pickled files: one line
-        from .checkpointing import checkpoint_info  # imports Lightning: only when opened
+        from .checkpoint_file import checkpoint_info
 
         info = checkpoint_info(ckpt)
     except ValueError as exc:

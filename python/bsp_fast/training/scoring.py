@@ -74,3 +74,32 @@ class TaskMetrics(torch.nn.Module):
             metric.reset()
         if self.fallback is not None:
             self.fallback.reset()
+
+
+#: per-clip strings :func:`prediction_step` returns besides the arrays
+PREDICTION_STRINGS = ("video_id", "pedestrian_id", "age", "gender")
+
+
+def eval_step(spec, net, batch: dict, metrics: TaskMetrics) -> torch.Tensor:
+    """One val/test batch: the net's output, its loss and metrics added to ``metrics``
+    (the step of ``TaskModule``'s validation and test and of the plain scorer alike, so
+    the two cannot drift)."""
+    spec.check_batch(batch)
+    output = net.forward_batch(batch)
+    metrics.update_loss(net.loss(output, batch), spec.batch_size(batch))
+    metrics.update(output, batch, net)
+    return output
+
+
+def prediction_step(spec, net, batch: dict) -> dict:
+    """The de-normalised outputs of one batch (tensors; the datasets of ``bsp-predict``):
+    the task's arrays, ``frames``, ``clip_id``, ``row``, ``start_frame``, ``label``, and
+    lists of the clips' ``video_id``, ``pedestrian_id``, ``age``, ``gender``."""
+    spec.check_batch(batch)
+    output = net.forward_batch(batch).detach().float()
+    out = spec.predictions(output, batch, net)
+    meta = batch["meta"]
+    out.update(clip_id=meta["clip_id"], row=meta["row"], start_frame=meta["start_frame"],
+               label=batch["label"])
+    out.update({k: list(meta[k]) for k in PREDICTION_STRINGS})
+    return out

@@ -18,13 +18,12 @@ def rank() -> int:  # Lightning's: from the launcher's environment, then the tra
 
 
 # ---------------------------------------------------------------------- data
-def make_datamodule(cfg: dict, h5=None):
+def make_datamodule(cfg: dict, h5=None, *, plain: bool = False):
     """The ``BSPDataModule`` of a config (``h5``: an existing file to use instead), or with
-    ``mix`` a ``MixedDataModule`` (its ``data: true`` source reads that data module)."""
+    ``mix`` a ``MixedDataModule`` (its ``data: true`` source reads that data module).
+    ``plain``: the same data as a ``ClipData``, without Lightning (scoring a checkpoint)."""
     if cfg.get("mix") is not None:
         return _mixed_datamodule(cfg, h5)
-    from ..data import BSPDataModule
-
     data = Path(h5 or cfg["data"])
     if not data.exists():
         raise RunError(f"{data}: no such dataset directory or HDF5 file")
@@ -41,13 +40,17 @@ def make_datamodule(cfg: dict, h5=None):
     task = get_task(cfg["task"])
     dataset_options = task.dataset_options(cfg)
     augment = cfg["augment"] and task.augments
-    return BSPDataModule(**paths, task=cfg["task"], clip_length=cfg["clip_length"],
-                         clip_offset=cfg["clip_offset"], benchmark=cfg["benchmark"],
-                         balance=cfg["balance"], noise=cfg["noise"], mjp=cfg["mjp"],
-                         batch_size=cfg["batch_size"], num_workers=cfg["workers"],
-                         augment=augment, seed=cfg["seed"], sampler_seed=cfg["seed"],
-                         convert_options=convert, dataset_options=dataset_options,
-                         verbose=not cfg["quiet"] and rank() == 0)
+    if plain:
+        from ..data.clip_data import ClipData as cls
+    else:
+        from ..data.datamodule import BSPDataModule as cls
+    return cls(**paths, task=cfg["task"], clip_length=cfg["clip_length"],
+               clip_offset=cfg["clip_offset"], benchmark=cfg["benchmark"],
+               balance=cfg["balance"], noise=cfg["noise"], mjp=cfg["mjp"],
+               batch_size=cfg["batch_size"], num_workers=cfg["workers"],
+               augment=augment, seed=cfg["seed"], sampler_seed=cfg["seed"],
+               convert_options=convert, dataset_options=dataset_options,
+               verbose=not cfg["quiet"] and (plain or rank() == 0))
 
 
 def _mixed_datamodule(cfg: dict, h5=None):

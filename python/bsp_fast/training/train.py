@@ -14,18 +14,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import config as C
+from ..command_line import error_hint
 from ..atomic import OutputOverlapError, atomic_output, refuse, remove
 from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, is_temporary, \
     open_run, read_marker, read_run, refuse_unsafe_output, resume_hint, write_json, \
     write_marker
 from .precision import check_precision, decide_precision, kept_precision, machine_record, \
-    native_bf16, probe_key, resolve_precision, run_model_key, time_steps
+    probe_key, run_model_key, time_steps
 from .setup import make_datamodule, make_trainer, prepare_data, rank as _rank
 from .tasks import TASKS, get_task
 
-# (resolve_precision, native_bf16 and check_precision live in .precision; importable here too)
-__all__ = ["train", "main", "TrainResult", "resolve_precision", "native_bf16", "check_precision",
-           "make_datamodule", "make_trainer", "prepare_data"]
+__all__ = ["train", "main", "TrainResult", "few_updates"]
 
 
 @dataclass
@@ -85,6 +84,19 @@ def resolve_config(cli: dict, config_path=None) -> tuple:
 
 
 # ---------------------------------------------------------------------- the run
+def few_updates(cfg: dict, train_clips: int, least: int = 3) -> str | None:
+    """Why the run will hardly learn, when its epochs hold fewer than ``least`` optimiser
+    updates (e.g. the default batch of 256 over a 40-clip sample: one per epoch); None
+    otherwise. The batch suggested gives about ten per epoch."""
+    per_epoch = -(-train_clips // cfg["batch_size"])
+    if per_epoch >= least or cfg.get("max_steps"):
+        return None
+    batch = 1 << max(0, (train_clips // 10).bit_length() - 1)  # a power of two
+    return (f"{train_clips} train clips at --batch-size {cfg['batch_size']} make {per_epoch} "
+            f"update(s) per epoch, {per_epoch * cfg['epochs']} in all: too few to learn "
+            f"from; pass a smaller --batch-size (e.g. {batch}) or more --epochs")
+
+
 def _shared_tmp(cfg: dict) -> str | None:
     """Processes the user started (torchrun, or one bsp-train per machine with NODE_RANK
     and --num-nodes): the run directory's temporary name, the same on every rank."""
@@ -94,29 +106,37 @@ def _shared_tmp(cfg: dict) -> str | None:
 
 
 def _train(cli: dict, config_path=None) -> TrainResult | None:
-    from .lifecycle import signals
+    from .stopping import signals
 
     with signals() as sig:  # SIGINT/SIGTERM: Interrupted, deferred to batch ends in fit
         result = _run(cli, config_path, sig)
     return result
 
 
+def _check_inputs(cfg: dict, resume, config_path) -> None:
+    """What can be refused before PyTorch is imported: missing data, an output that is or
+    holds an input (--force never replaces one)."""
+    if cfg.get("mix") is None and not Path(cfg["data"]).exists():
+        raise RunError(f"{cfg['data']}: no such dataset directory or HDF5 file")
+    if not os.environ.get(ENV_TMP):
+        in_place = resume["run_dir"] if resume is not None else None
+        refuse_unsafe_output(cfg["out"], force=cfg["force"],
+                             inputs=_inputs(cfg, resume, config_path), in_place=in_place)
+
+
 def _run(cli: dict, config_path, sig) -> TrainResult | None:
     cfg, resume = resolve_config(cli, config_path)
+    _check_inputs(cfg, resume, config_path)
     import lightning.pytorch as pl
     import torch
 
-    from .lifecycle import (Interrupted, Lifecycle, OutputWriteError, epochs_note,
-                            parse_duration, test_checkpoint)
+    from .lifecycle import Lifecycle, epochs_note, test_checkpoint
+    from .stopping import Interrupted, OutputWriteError
 
     from .initial import log_initial
     from .module import TASK_MODULES
 
     shared = _shared_tmp(cfg)
-    in_place = resume["run_dir"] if resume is not None else None
-    if not os.environ.get(ENV_TMP):  # before any work: --force never replaces an input
-        refuse_unsafe_output(cfg["out"], force=cfg["force"],
-                             inputs=_inputs(cfg, resume, config_path), in_place=in_place)
     started = max(int(os.environ.get(k, "0")) if os.environ.get(k, "").isdigit() else 0
                   for k in ("RANK", "NODE_RANK"))  # > 0: not the first process/machine
     if shared and started > 0 and not os.environ.get(ENV_TMP):
@@ -140,6 +160,8 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
         module.net.compute = torch.compile(module.net.compute, dynamic=False)
     dm = make_datamodule(cfg)
     prepare_data(dm, convert=not child)
+    if not child and (note := few_updates(cfg, len(dm.datasets["train"]))):
+        print(f"bsp-train: warning: {note}", file=sys.stderr)
     precision, why = _precision(cfg, module, dm, resume)
     check_precision(precision, cfg["accelerator"])
     ckpt_path = None
@@ -152,7 +174,7 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
     floor = saved if isinstance(saved, int) and saved > cfg["epochs"] else None
     if child:
         tmp = Path(os.environ[ENV_TMP])
-        life = Lifecycle(tmp, parse_duration(cfg["checkpoint_every"]), sig)
+        life = Lifecycle(tmp, C.parse_duration(cfg["checkpoint_every"]), sig)
         trainer = make_trainer(cfg, tmp, precision, callbacks=[life], max_epochs=floor)
         if resume is not None and resume["run_dir"] is not None:
             ckpt_path = tmp / "checkpoints" / "last.ckpt"
@@ -175,7 +197,7 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
         _write_config(cfg, tmp, precision, precision_reason=why)
         if copy_from is not None:
             ckpt_path = tmp / "checkpoints" / "last.ckpt"
-        life = Lifecycle(tmp, parse_duration(cfg["checkpoint_every"]), sig, life_marker)
+        life = Lifecycle(tmp, C.parse_duration(cfg["checkpoint_every"]), sig, life_marker)
         # a run stopped after its training ended (while testing or writing metrics):
         # its last epoch again as the cap, so fit restores the callbacks and returns
         done = previous.get("fit_done") if previous else None
@@ -276,7 +298,7 @@ def _initial(cfg: dict, dm, model=None) -> dict:
 def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds,
             tested: str = "best", precision_reason: str | None = None):
     from .curves import plot_curves, read_logs
-    from .lifecycle import OutputWriteError
+    from .stopping import OutputWriteError
 
     test = dict(trainer.lightning_module.results.get("test", {}))
     from .per_recording import write_breakdown
@@ -347,7 +369,7 @@ def _best_epoch(trainer) -> int | None:
     best = trainer.checkpoint_callback
     if not best.best_model_path or best.best_model_score is None:
         return None
-    from .checkpointing import checkpoint_info  # Lightning: imported only once training
+    from .checkpoint_file import checkpoint_info
     return int(checkpoint_info(best.best_model_path)["epoch"]) + 1
 
 
@@ -369,16 +391,13 @@ def train(task: str | None = None, model: str | None = None, data=None, out=None
 
 # ---------------------------------------------------------------------- CLI
 def _epilog() -> str:
-    lines = ["tasks and models:"]
-    try:
-        from .. import models
+    from ..models.catalogue import catalogue
 
-        for task in TASKS:
-            lines.append(f"  {task}:")
-            for name, text in models.available(task).items():
-                lines.append(f"    {name:24s} {text}")
-    except Exception as exc:  # pragma: no cover - models not importable
-        lines.append(f"  (model list unavailable: {exc})")
+    lines = ["tasks and models:"]
+    for task in TASKS:
+        lines.append(f"  {task}:")
+        for name, entry in catalogue()[task].items():
+            lines.append(f"    {name:24s} {entry.description}")
     lines += ["", "exit codes: 0 success, 1 bad data or failure, 2 bad arguments, 3 run "
               "directory exists (use --force), 130 interrupted",
               "docs: docs/training.md"]
@@ -408,9 +427,9 @@ def main(argv=None) -> int:
             print(C.dump(resolve_config(cli, config_path)[0]), end="")
             return 0
         result = _train(cli, config_path)
-    except argparse.ArgumentError as exc:  # argparse's form: usage, then the message
-        parser.print_usage(sys.stderr)
-        print(f"bsp-train: error: {exc}", file=sys.stderr)
+    except argparse.ArgumentError as exc:  # one line, as every command's (command_line)
+        print(f"bsp-train: error: {exc}{error_hint(str(exc), parser)} (see bsp-train "
+              "--help)", file=sys.stderr)
         return 2
     except OutputOverlapError as exc:  # --out is or holds an input, --force or not
         return refuse("bsp-train", exc)
@@ -424,7 +443,7 @@ def main(argv=None) -> int:
         print("bsp-train: interrupted; nothing written", file=sys.stderr)
         return 130
     except BaseException as exc:  # SIGINT/SIGTERM (Interrupted) or a full disk
-        from .lifecycle import Interrupted, OutputWriteError
+        from .stopping import Interrupted, OutputWriteError
 
         if not isinstance(exc, (Interrupted, OutputWriteError)):
             raise

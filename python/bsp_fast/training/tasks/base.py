@@ -95,8 +95,8 @@ class Task:
     image_inputs: bool = False
     #: flips/rotations of the train clips apply (``--augment``)
     augments: bool = False
-    #: unit of the de-normalised predictions ``bsp-predict`` writes
-    prediction_units: str = "pixels"
+    #: unit of the de-normalised predictions ``bsp-predict`` writes (None: unitless)
+    prediction_units: str | None = "pixels"
     #: ``baseline:`` names a ``bsp-reproduce`` finding may use: ``{name: (label, f)}``
     #: with ``f(initial metrics) -> value``; default: the trivial baseline itself
     finding_baselines: dict = {}

@@ -26,6 +26,7 @@ class Classification(Task):
     description = "crossing vs not crossing from a 2D clip"
     batch_keys = ("inputs", "visible", "targets", "label", "meta")
     baseline = "majority class"
+    prediction_units = None  # logits, probabilities and 0/1 predictions
     metrics = (Metric("f1", "F1", "fraction", "higher", ".3f"),
                Metric("precision", "precision", "fraction", "higher", ".3f"),
                Metric("recall", "recall", "fraction", "higher", ".3f"),
