@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <memory>
 #include <set>
 #include <stdexcept>
 #include <tuple>
@@ -196,7 +197,23 @@ void exclude(const Plan& plan, const std::vector<detail::MediaFailure>& failures
 // `clips`: the clips of each split to write (a shard's part; all of them otherwise);
 // `keep_failures`: media failures come back even without skip_bad_media (shards).
 using SplitClips = std::array<const std::vector<Clip>*, 3>;
+
+// 1 for each table row that one of the clips uses.
+std::vector<std::uint8_t> used_rows(const PoseTable& t, const Plan& plan, const SplitClips& clips,
+                                    int L) {
+  std::vector<std::uint8_t> used(t.rows, 0);
+  for (const auto* split : clips)
+    for (const Clip& c : *split)
+      for (std::size_t k = 0; k < static_cast<std::size_t>(L); ++k)
+        used[plan.recordings[c.recording].rows[c.first + k]] = 1;
+  return used;
+}
+
+// `cells`: the deferred pose columns (nullptr: the table holds them), parsed while the
+// clips are written; the rows no clip uses are checked afterwards, so a malformed cell
+// anywhere still fails the conversion.
 std::vector<detail::MediaFailure> write_output(const std::string& out_path, const PoseTable& table,
+                                               const DeferredCells* cells,
                                                const Plan& plan, const SplitClips& clips,
                                                const MediaPlan* media, const ConvertOptions& opt,
                                                ConvertReport& report, ConvertProgress* progress,
@@ -217,9 +234,10 @@ std::vector<detail::MediaFailure> write_output(const std::string& out_path, cons
     g.attr("class_counts", std::vector<std::int64_t>{static_cast<std::int64_t>(report.class_counts[s][0]),
                                                      static_cast<std::int64_t>(report.class_counts[s][1])});
     g.attr("recordings", static_cast<std::int64_t>(report.recordings_per_split[s]));
-    detail::write_split(g, table, plan, *clips[static_cast<std::size_t>(s)], opt.clips.length, opt,
-                        progress);
+    detail::write_split(g, table, cells, plan, *clips[static_cast<std::size_t>(s)],
+                        opt.clips.length, opt, progress);
   }
+  if (cells) cells->check_rows(used_rows(table, plan, clips, opt.clips.length), opt.threads);
   report.seconds["write"] = since(t0);
   std::vector<detail::MediaFailure> failed;
   if (media) {
@@ -316,8 +334,9 @@ ConvertReport convert_shard(const std::string& csv_path, const std::string& out_
   check_cancel(progress);
   if (opt.verify && opt.shard.index == 0) verify(table, plan, opt, report, progress);
   const SplitClips mine = {&clips[0], &clips[1], &clips[2]};
-  auto failed = write_output(out_path, table, plan, mine, opt.media.enabled ? &media : nullptr, opt,
-                             report, progress, /*keep_failures=*/true);
+  auto failed = write_output(out_path, table, nullptr, plan, mine,
+                             opt.media.enabled ? &media : nullptr, opt, report, progress,
+                             /*keep_failures=*/true);
   for (const auto& f : failed) {
     std::uint64_t order = 0;  // split << 32 | block in the whole split's table
     for (std::size_t s = 0; s < 3; ++s) {
@@ -344,6 +363,85 @@ RecordingKey key_of(const PoseTable& t, const LeftOutRecording& r) {
   return {static_cast<std::int32_t>(it - ids.begin()), r.camera_idx, r.pedestrian_idx};
 }
 
+// The planning and writing passes of convert_csv: again without the recordings whose
+// media failed (skip_bad_media) until a pass writes the whole file.
+ConvertReport convert_passes(const std::string& csv_path, const std::string& out_path,
+                             const PoseTable& table, const DeferredCells* cells,
+                             const ConvertReport& base, std::set<RecordingKey> excluded,
+                             std::vector<BadMedia> bad, const ConvertOptions& opt,
+                             ConvertProgress* progress) {
+  double check_seconds = 0;
+  for (int writes = 1;;) {
+    check_cancel(progress);
+    ConvertReport report = base;
+    const Pass pass = plan_pass(table, excluded, csv_path, opt, report);
+    const Plan& plan = pass.plan;
+    const MediaPlan& media = pass.media;
+    if (opt.media.enabled) {
+      const auto t0 = Clock::now();
+      auto failed = detail::check_media(table, media.tables, media.files, opt.threads, progress);
+      check_seconds += since(t0);
+      if (!failed.empty() && !opt.media.skip_bad_media) std::rethrow_exception(failed.front().error);
+      if (!failed.empty()) {
+        exclude(plan, failed, excluded, bad);
+        continue;
+      }
+    }
+    check_cancel(progress);
+    if (opt.verify) verify(table, plan, opt, report, progress);
+    check_cancel(progress);
+    report.media.bad = bad;
+    const SplitClips all = {&plan.splits[0], &plan.splits[1], &plan.splits[2]};
+    auto failed = write_output(out_path, table, cells, plan, all,
+                               opt.media.enabled ? &media : nullptr, opt, report, progress);
+    if (!failed.empty()) {
+      exclude(plan, failed, excluded, bad);
+      ++writes;
+      continue;
+    }
+    for (int s = 0; s < 3; ++s) report.media.frames[s] = media.tables[s].frames();
+    report.media.check_seconds = check_seconds;
+    report.media.seconds = check_seconds + (opt.media.enabled ? report.seconds["media"] : 0.0);
+    report.media.passes = writes;
+    if (progress) progress->stage = ConvertStage::done;
+    return report;
+  }
+}
+
+// The three 26-joint pose columns, 85 % of data.csv: without media, --verify or shards
+// (which read them for every row), bsp-convert parses them only while it writes each clip
+// (DeferredCells), so the table never holds them: half a gigabyte less memory for the
+// published size, and the parsing overlaps the writing.
+const std::vector<std::string> kDeferredPoses = {
+    "frame.pedestrian.pose.world", "frame.pedestrian.pose.component",
+    "frame.pedestrian.pose.relative"};
+bool defer_poses(const ConvertOptions& o) {
+  return !o.media.enabled && !o.verify && o.shard.count == 0;
+}
+
+// Runs fn() (planning and writing); with deferred cells, a malformed pose cell anywhere is
+// reported as read_pose_csv reports it and before any other error, as when the cells were
+// parsed while reading: they are all checked before an error other than a cancel leaves.
+template <class Fn>
+ConvertReport deferred_errors_first(const DeferredCells* cells, const ConvertOptions& opt,
+                                    const PoseTable& t, const ConvertProgress* progress, Fn&& fn) {
+  if (!cells) return fn();
+  try {
+    return fn();
+  } catch (const DeferredCellError&) {
+    cells->throw_parse_error();
+  } catch (...) {
+    if (!(progress && progress->cancel.load(std::memory_order_relaxed))) {
+      try {
+        cells->check_rows(std::vector<std::uint8_t>(t.rows, 0), opt.threads);
+      } catch (const DeferredCellError&) {
+        cells->throw_parse_error();
+      }
+    }
+    throw;
+  }
+}
+
 }  // namespace
 
 void check_cancel(const ConvertProgress* p) {
@@ -358,60 +456,30 @@ ConvertReport convert_csv(const std::string& csv_path, const std::string& out_pa
   CsvReadOptions ro;
   ro.columns = needed_columns(opt.media.enabled);
   ro.threads = opt.threads;
+  if (defer_poses(opt)) ro.deferred = kDeferredPoses;
   if (progress) ro.rows_total = &progress->total, ro.rows_done = &progress->done;  // read: rows
   const PoseTable table = read_pose_csv(csv_path, ro);
-  check_utf8(table);  // ids and paths reach Python and HDF5 as text
-  base.source_crc32 = table.file_crc32;  // computed while the reader scanned the file
-  base.source_bytes = table.file_bytes;
-  base.seconds["read"] = since(t0);
-  if (progress) progress->done = table.rows, progress->stage = ConvertStage::plan;
-
-  std::set<RecordingKey> excluded;
-  std::vector<BadMedia> bad;
-  for (const LeftOutRecording& r : opt.shard.exclude) {
-    excluded.insert(key_of(table, r));
-    bad.push_back({r.path, r.reason});
-  }
-  if (opt.shard.count > 0) {
-    base.media.bad = bad;
-    return convert_shard(csv_path, out_path, table, base, excluded, opt, progress);
-  }
-  double check_seconds = 0;
-  for (int writes = 1;;) {
-    check_cancel(progress);
-    ConvertReport report = base;
-    const Pass pass = plan_pass(table, excluded, csv_path, opt, report);
-    const Plan& plan = pass.plan;
-    const MediaPlan& media = pass.media;
-    if (opt.media.enabled) {
-      t0 = Clock::now();
-      auto failed = detail::check_media(table, media.tables, media.files, opt.threads, progress);
-      check_seconds += since(t0);
-      if (!failed.empty() && !opt.media.skip_bad_media) std::rethrow_exception(failed.front().error);
-      if (!failed.empty()) {
-        exclude(plan, failed, excluded, bad);
-        continue;
-      }
+  const std::unique_ptr<DeferredCells> cells =
+      defer_poses(opt) ? std::make_unique<DeferredCells>(table, ro) : nullptr;
+  return deferred_errors_first(cells.get(), opt, table, progress, [&] {
+    check_utf8(table);  // ids and paths reach Python and HDF5 as text
+    base.source_crc32 = table.file_crc32;  // computed while the reader scanned the file
+    base.source_bytes = table.file_bytes;
+    base.seconds["read"] = since(t0);
+    if (progress) progress->done = table.rows, progress->stage = ConvertStage::plan;
+    std::set<RecordingKey> excluded;
+    std::vector<BadMedia> bad;
+    for (const LeftOutRecording& r : opt.shard.exclude) {
+      excluded.insert(key_of(table, r));
+      bad.push_back({r.path, r.reason});
     }
-    check_cancel(progress);
-    if (opt.verify) verify(table, plan, opt, report, progress);
-    check_cancel(progress);
-    report.media.bad = bad;
-    const SplitClips all = {&plan.splits[0], &plan.splits[1], &plan.splits[2]};
-    auto failed = write_output(out_path, table, plan, all, opt.media.enabled ? &media : nullptr,
-                               opt, report, progress);
-    if (!failed.empty()) {
-      exclude(plan, failed, excluded, bad);
-      ++writes;
-      continue;
+    if (opt.shard.count > 0) {
+      base.media.bad = bad;
+      return convert_shard(csv_path, out_path, table, base, excluded, opt, progress);
     }
-    for (int s = 0; s < 3; ++s) report.media.frames[s] = media.tables[s].frames();
-    report.media.check_seconds = check_seconds;
-    report.media.seconds = check_seconds + (opt.media.enabled ? report.seconds["media"] : 0.0);
-    report.media.passes = writes;
-    if (progress) progress->stage = ConvertStage::done;
-    return report;
-  }
+    return convert_passes(csv_path, out_path, table, cells.get(), base, excluded, bad, opt,
+                          progress);
+  });
 }
 
 }  // namespace bsp

@@ -14,9 +14,11 @@
 
 namespace bsp::detail {
 
-void write_split(const h5::Group& g, const PoseTable& t, const Plan& plan,
-                 const std::vector<Clip>& clips, int L, const ConvertOptions& opt,
-                 ConvertProgress* progress);
+// `cells`: the pose columns' source when the table defers them (CsvReadOptions::deferred),
+// else nullptr (the table's arrays).
+void write_split(const h5::Group& g, const PoseTable& t, const DeferredCells* cells,
+                 const Plan& plan, const std::vector<Clip>& clips, int L,
+                 const ConvertOptions& opt, ConvertProgress* progress);
 void write_clip_meta(const h5::Group& g, const PoseTable& t, const Plan& plan,
                      const std::vector<Clip>& clips, int L);
 // Per recording: largest disagreement between the pose columns (mm) and between

@@ -57,14 +57,19 @@ void split_transforms(const float* t6, std::size_t n, float* loc, float* rot) {
   rotation_matrices_f32(t6, 6, n, rot);
 }
 
+// The three 26-joint pose cells of one row (relative, component, world; 156 floats each).
+struct PoseCells {
+  const float *relative, *component, *world;
+};
+
 // Fills frame f of one clip into the per-field buffers at frame slot `s`.
-void fill_frame(const PoseTable& t, std::size_t row, std::vector<std::vector<std::uint8_t>>& buf,
-                std::size_t s) {
+void fill_frame(const PoseTable& t, std::size_t row, const PoseCells& pose,
+                std::vector<std::vector<std::uint8_t>>& buf, std::size_t s) {
   auto F = [&](int i) { return reinterpret_cast<float*>(buf[i].data()) + s * frame_fields()[i].per_frame(); };
   std::memcpy(F(0), &t.pose_camera[row * J * 2], sizeof(float) * J * 2);
-  split_transforms(&t.pose_relative[row * J * 6], J, F(1), F(2));
-  split_transforms(&t.pose_component[row * J * 6], J, F(3), F(4));
-  split_transforms(&t.pose_world[row * J * 6], J, F(5), F(6));
+  split_transforms(pose.relative, J, F(1), F(2));
+  split_transforms(pose.component, J, F(3), F(4));
+  split_transforms(pose.world, J, F(5), F(6));
   split_transforms(&t.walker_transform[row * 6], 1, F(7), F(8));
   std::memcpy(F(9), &t.velocity[row * 3], sizeof(float) * 3);
   float* bb = F(10);
@@ -81,6 +86,32 @@ void fill_frame(const PoseTable& t, std::size_t row, std::vector<std::vector<std
 }
 
 using Buffers = std::vector<std::vector<std::uint8_t>>;  // one byte buffer per field
+
+// Column indices of the pose cells (kPoseCsvColumns).
+constexpr int kWorldColumn = 17, kComponentColumn = 18, kRelativeColumn = 19;
+
+// Fills frame slots [s, s + m) from rows[0..m): the table's pose arrays, or (deferred) the
+// rows' pose cells parsed from the file into `scratch` first, a clip's run of rows at once.
+void fill_frames(const PoseTable& t, const DeferredCells* cells, const std::size_t* rows,
+                 std::size_t m, Buffers& buf, std::size_t s, std::vector<float>& scratch,
+                 std::vector<char>& text) {
+  if (!cells) {
+    for (std::size_t k = 0; k < m; ++k) {
+      const std::size_t o = rows[k] * J * 6;
+      fill_frame(t, rows[k], {&t.pose_relative[o], &t.pose_component[o], &t.pose_world[o]}, buf,
+                 s + k);
+    }
+    return;
+  }
+  const std::size_t per_row = cells->floats_per_row();
+  scratch.resize(m * per_row);
+  cells->read(rows, m, scratch.data(), text);
+  for (std::size_t k = 0; k < m; ++k) {
+    const float* p = scratch.data() + k * per_row;
+    fill_frame(t, rows[k], {p + cells->offset_of(kRelativeColumn), p + cells->offset_of(kComponentColumn),
+                            p + cells->offset_of(kWorldColumn)}, buf, s + k);
+  }
+}
 
 // One task on its own thread; join() rethrows its exception. The destructor joins too (an
 // exception of the calling thread must not leave the task running on freed buffers).
@@ -157,9 +188,9 @@ std::string strip_ext(const std::string& p) {
 
 }  // namespace
 
-void write_split(const h5::Group& g, const PoseTable& t, const Plan& plan,
-                 const std::vector<Clip>& clips, int L, const ConvertOptions& opt,
-                 ConvertProgress* progress) {
+void write_split(const h5::Group& g, const PoseTable& t, const DeferredCells* cells,
+                 const Plan& plan, const std::vector<Clip>& clips, int L,
+                 const ConvertOptions& opt, ConvertProgress* progress) {
   const hsize_t N = clips.size();
   const h5::Compression none{}, packed{true, opt.compression_level};
   g.create_group("targets");
@@ -193,11 +224,16 @@ void write_split(const h5::Group& g, const PoseTable& t, const Plan& plan,
   }
   const auto fill = [&](std::size_t c0, Batch& buf) {
     const std::size_t nb = std::min<std::size_t>(batch, N - c0);
-    parallel_for(nb * static_cast<std::size_t>(L), 256, [&](std::size_t lo, std::size_t hi) {
-      for (std::size_t s = lo; s < hi; ++s) {
-        const Clip& c = clips[c0 + s / static_cast<std::size_t>(L)];
-        const std::size_t row = plan.recordings[c.recording].rows[c.first + s % static_cast<std::size_t>(L)];
-        fill_frame(t, row, buf.raw, s);
+    const std::size_t Lz = static_cast<std::size_t>(L);
+    parallel_for(nb * Lz, 256, [&](std::size_t lo, std::size_t hi) {
+      std::vector<float> scratch;
+      std::vector<char> text;
+      for (std::size_t s = lo; s < hi;) {  // one clip's frames (or the block's part) at a time
+        const Clip& c = clips[c0 + s / Lz];
+        const std::size_t k = s % Lz, m = std::min(hi - s, Lz - k);
+        fill_frames(t, cells, &plan.recordings[c.recording].rows[c.first + k], m, buf.raw, s,
+                    scratch, text);
+        s += m;
       }
     }, opt.threads);
     if (opt.compress) pack_chunks(fields, nb, rows_per_chunk, static_cast<std::size_t>(L),

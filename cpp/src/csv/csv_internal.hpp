@@ -68,6 +68,7 @@ class InputFile {
   InputFile& operator=(const InputFile&) = delete;
   const std::string& path() const { return path_; }
   std::size_t size() const { return size_; }  // when opened
+  std::int64_t mtime_ns() const { return mtime_ns_; }  // when opened
   // Reads bytes [offset, offset + n) into `out`; FileChanged when the file now ends earlier.
   void read(std::size_t offset, std::size_t n, char* out) const;
   // FileChanged when the file's size or modification time differs from when it was opened.

@@ -187,7 +187,36 @@ std::vector<bool> wanted_columns(const CsvReadOptions& opt) {
   }
   if (opt.check_duplicates)
     for (int c : kKeyColumns) wanted[static_cast<std::size_t>(c)] = true;
+  for (const std::string& name : opt.deferred) {
+    const int c = pose_csv_column_index(name);
+    if (c < 0 || kPoseCsvSpecs[c].kind != CsvKind::floats || !wanted[static_cast<std::size_t>(c)])
+      throw std::invalid_argument("read_pose_csv: cannot defer column '" + name +
+                                  "': only selected float list columns can be");
+  }
   return wanted;
+}
+
+// The deferred columns and the header cell of each, in header order; a missing one is
+// refused by map_header like any required column.
+void defer_columns(const CsvReadOptions& opt, const std::vector<std::string>& names,
+                   std::vector<int>& cols, PoseTable& t) {
+  for (std::size_t k = 0; k < names.size(); ++k) {
+    const int c = cols[k];
+    if (c < 0) continue;
+    for (const std::string& name : opt.deferred)
+      if (pose_csv_column_index(name) == c) {
+        t.deferred_columns.push_back(c);
+        t.deferred_cells.push_back(static_cast<int>(k));
+        cols[k] = -1;  // skipped by the row parser: DeferredCells reads it
+      }
+  }
+  t.header_cells = names.size();
+  auto& present = t.columns_present;  // only what the table holds
+  const auto& deferred = t.deferred_columns;
+  present.erase(std::remove_if(present.begin(), present.end(), [&](const std::string& name) {
+    const int c = pose_csv_column_index(name);
+    return std::find(deferred.begin(), deferred.end(), c) != deferred.end();
+  }), present.end());
 }
 
 // Maps header cells to wanted column indices (-1 = skip); every wanted column must appear.
@@ -296,9 +325,15 @@ void parse_file(const InputFile& file, const CsvReadOptions& opt,
                         "feed at byte " + std::to_string(cr) + ": CR-only line ends are not "
                         "supported (expected '\\n' or '\\r\\n' line ends)");
   const std::vector<std::string> names = split_header(lines.header, path);
-  const std::vector<int> cols = map_header(names, wanted, opt, t);
+  std::vector<int> cols = map_header(names, wanted, opt, t);
   t.rows = lines.begin.size();
   t.line = lines.number;
+  if (!opt.deferred.empty()) {
+    defer_columns(opt, names, cols, t);
+    t.row_begin.assign(lines.begin.begin(), lines.begin.end());
+    t.row_end.assign(lines.end.begin(), lines.end.end());
+    t.file_mtime_ns = file.mtime_ns();
+  }
   if (opt.rows_total) *opt.rows_total = t.rows;
   csv_detail::parse_rows(file, lines, names, cols, t, threads, opt.rows_done);
   if (opt.check_duplicates) check_duplicates(t);

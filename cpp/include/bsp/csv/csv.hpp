@@ -10,6 +10,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -46,6 +47,14 @@ struct PoseTable {
   // The file's own name of the crossing column ("frame.pedestrian.is_crossing" or
   // "frame.pedestrian.is_on_driving_lane"); empty when it was not read.
   std::string crossing_column;
+
+  // Only with CsvReadOptions::deferred (DeferredCells reads them): each row's bytes in the
+  // file [row_begin, row_end), the file's modification time, the header's cell count and
+  // the deferred columns with the header cell of each, in header order.
+  std::vector<std::uint64_t> row_begin, row_end;
+  std::int64_t file_mtime_ns = 0;
+  std::size_t header_cells = 0;
+  std::vector<int> deferred_columns, deferred_cells;
 };
 
 // The 24 columns in the original writer's order (docs/dataset-format.md, "2. data.csv").
@@ -65,11 +74,56 @@ struct CsvReadOptions {
   // is indexed, then the rows parsed so far (updated every few hundred rows).
   std::atomic<std::uint64_t>* rows_total = nullptr;
   std::atomic<std::uint64_t>* rows_done = nullptr;
+  // Float list columns (among `columns`) that are only required in the header, not parsed:
+  // their cells are skipped and DeferredCells parses them later, row by row. bsp-convert
+  // defers the three 26-joint pose columns, 85 % of the file, and parses them while it
+  // writes the clips, so the whole table never holds them (half a gigabyte for the
+  // published size, most of the conversion's memory and page faults).
+  std::vector<std::string> deferred;
 };
 
 // Throws CsvParseError (file, line, column, what was expected and what was found) for bad
 // input, std::invalid_argument for an unknown name in options.columns.
 PoseTable read_pose_csv(const std::string& path, const CsvReadOptions& options = {});
+
+// Thrown by DeferredCells::read for a malformed deferred cell: the caller stops and calls
+// DeferredCells::throw_parse_error, which names the file's first bad row.
+struct DeferredCellError {};
+
+// The deferred columns of a PoseTable (CsvReadOptions::deferred), parsed from its file on
+// demand with the reader's own cell scanners (the same floats, bit for bit, as a plain
+// read). Safe to use from several threads at once.
+class DeferredCells {
+ public:
+  // `read_options`: those the table was read with (throw_parse_error reads again with them,
+  // nothing deferred). Throws CsvParseError when the file changed since it was read.
+  DeferredCells(const PoseTable& table, const CsvReadOptions& read_options);
+  ~DeferredCells();
+  DeferredCells(const DeferredCells&) = delete;
+  DeferredCells& operator=(const DeferredCells&) = delete;
+  // Floats per row: the deferred columns' numbers, in kPoseCsvColumns order.
+  std::size_t floats_per_row() const { return per_row_; }
+  // Offset of column `index` (0..23) within a row's floats; -1 when it is not deferred.
+  int offset_of(int index) const;
+  // Parses `rows` (indices into the table) into out[k * floats_per_row() ...]; `buf` is the
+  // caller's scratch space for the rows' text. DeferredCellError on a malformed cell,
+  // CsvParseError when the file changed.
+  void read(const std::size_t* rows, std::size_t count, float* out, std::vector<char>& buf) const;
+  // The rows no read() call asked for are parsed here too (threads as in parallel_for), so a
+  // malformed cell anywhere fails as a plain read would; DeferredCellError then.
+  void check_rows(const std::vector<std::uint8_t>& done, int threads) const;
+  // Reads the file again without deferring and throws what read_pose_csv throws for its
+  // first bad row; a CsvParseError saying the file changed when that read succeeds.
+  [[noreturn]] void throw_parse_error() const;
+
+ private:
+  struct File;
+  const PoseTable& t_;
+  CsvReadOptions options_;
+  std::size_t per_row_ = 0;
+  std::vector<int> offsets_;  // per column (24), -1 when not deferred
+  std::unique_ptr<File> file_;
+};
 
 // Writes all 24 columns exactly as pandas `to_csv(index=False)` wrote the recorder's
 // DataFrame. The file appears atomically (written under a temporary name, then renamed).
