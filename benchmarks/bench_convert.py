@@ -7,7 +7,9 @@ Same run, same generated file (random float32 poses, ~10 KB per row like the rea
    fastest pure-Python route we found), and bsp_fast.read_csv with 1 and 2 threads.
 2. The whole conversion of the full file (--rows, default 225,000 like the published
    dataset) with `bsp-convert` in a child process: wall time and peak resident memory,
-   uncompressed and with --compress (file size, write time).
+   uncompressed and with --compress (file size, write time), each next to `wc -l` and
+   `bsp_fast.read_csv` (pose columns, in this process) of the same file timed just before
+   it, and the conversion's ratio to each (issue 59: at most 8x `wc -l`).
 
     PYTHONPATH=python:build/<name>/py python3 benchmarks/bench_convert.py [--rows 225000] [--csv-rows 20000]
 
@@ -88,6 +90,13 @@ def run_convert(dataset: Path, out: Path, *extra) -> tuple:
     return wall, peak_kib / 1024, os.path.getsize(out) / 1e6, cpu
 
 
+def references(csv: Path) -> tuple:
+    """Wall seconds of `wc -l` and of bsp_fast.read_csv (pose columns) of `csv`."""
+    wc, _ = timed(lambda: subprocess.run(["wc", "-l", str(csv)], check=True, capture_output=True))
+    rd, _ = timed(lambda: bf.read_csv(csv, columns=list(bench_csv.POSE_COLUMNS)))
+    return wc, rd
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rows", type=int, default=225_000)
@@ -136,14 +145,18 @@ def convert_table(tmp: Path, args, runs) -> int:
           f"bsp_fast from {Path(bf.__file__).parent}, load {os.getloadavg()[0]:.2f}:\n")
     # CPU s: user + system time of the child, all threads (less sensitive than the wall
     # time to other work on the machine, though not immune: caches and memory are shared).
-    print("| output | wall s | CPU s | peak RSS MB | file MB | load before |")
-    print("|---|---:|---:|---:|---:|---:|")
+    # wc -l and read_csv of the same file just before each conversion: the page cache and
+    # the machine's load are then as alike as one run makes them.
+    print("| output | wall s | CPU s | peak RSS MB | file MB | wc -l s | read_csv s | "
+          "÷ wc -l | ÷ read_csv | load before |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for label, extra in runs:
         for _ in range(args.repeat):
             load = os.getloadavg()[0]
+            wc, rd = references(full / "data.csv")
             wall, peak, mb, cpu = run_convert(full, tmp / "out.h5", *extra)
-            print(f"| {label} | {wall:.2f} | {cpu:.2f} | {peak:,.0f} | {mb:,.0f} | {load:.2f} |",
-                  flush=True)
+            print(f"| {label} | {wall:.2f} | {cpu:.2f} | {peak:,.0f} | {mb:,.0f} | {wc:.2f} | "
+                  f"{rd:.2f} | {wall / wc:.1f}× | {wall / rd:.1f}× | {load:.2f} |", flush=True)
     return 0
 
 
