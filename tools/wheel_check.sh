@@ -25,7 +25,11 @@
 #    libhdf5, h5py reading every dataset the core wrote), then the extras of
 #    WHEEL_CHECK_EXTRAS (default: preview, whose opencv wheel vendors its own OpenCV and
 #    FFmpeg) installed and, for each extra installed, bsp_fast imported with its modules
-#    (preview: a bsp-preview contact sheet).
+#    (preview: a bsp-preview contact sheet). Where torch is installed (WHEEL_CHECK_EXTRAS
+#    naming `torch`), a one-epoch bsp-train on the sample.
+#
+# WHEEL_CHECK_SUMMARY=FILE: the measurements (wheel size, install times, venv sizes, the
+# torch installed) as KEY=VALUE lines in FILE, for tools/wheel_matrix.sh's table.
 set -euo pipefail
 GIVEN=${1:+$(readlink -f "$1")}
 cd "$(dirname "$0")/.."
@@ -53,8 +57,8 @@ t_built=$SECONDS
 "$TOOLS/bin/auditwheel" show "$WHEEL" > "$WORK/show.txt" 2>&1
 echo "wheel_check: auditwheel show $(basename "$WHEEL"):"
 sed -n -e '/is consistent/,/^$/p' -e '/This constrains/,/^$/p' "$WORK/show.txt"
-"$TOOLS/bin/python" - "$WHEEL" "$WORK/show.txt" <<'PYEOF'
-import io, re, sys, zipfile
+"$TOOLS/bin/python" - "$WHEEL" "$WORK/show.txt" "$WORK/summary" <<'PYEOF'
+import io, os, re, sys, zipfile
 from elftools.elf.dynamic import DynamicSection
 from elftools.elf.elffile import ELFFile
 
@@ -80,6 +84,10 @@ for name in names:
             for tag in section.iter_tags("DT_NEEDED"):
                 if tag.needed not in inside:
                     external.setdefault(tag.needed, set()).add(name.rsplit("/", 1)[-1])
+with open(sys.argv[3], "a") as summary:
+    print(f"wheel={sys.argv[1].rsplit('/', 1)[-1]}\ntag={tag.group(1)}\n"
+          f"wheel_mb={os.path.getsize(sys.argv[1]) / 1e6:.1f}\nlibraries={len(vendored)}",
+          file=summary)
 print(f"wheel_check: {len(vendored)} libraries vendored "
       f"({sum(i.file_size for i in vendored) / 1e6:.0f} MB unpacked); from the system: "
       f"{' '.join(sorted(external))}")
@@ -260,6 +268,11 @@ PYEOF
 )
 venv_mib=$(du -sm "$WORK/venv")
 venv_mib=${venv_mib%%[[:space:]]*}
+summary python "$("$PYEXE" -c 'import platform; print(platform.python_version())')"
+summary venv_s "$(bc_ "$t_venv" "$t")"
+summary install_s "$(bc_ "$t_pip" "$t_venv")"
+summary packages "$installed"
+summary venv_mib "$venv_mib"
 export PATH="$WORK/venv/bin:$PATH"
 echo "wheel_check: python -m venv $(bc_ "$t_venv" "$t") s, pip install the wheel" \
      "$(bc_ "$t_pip" "$t_venv") s, nothing built ($installed packages, the venv $venv_mib MiB)"
@@ -270,15 +283,32 @@ bsp-convert sample-ds clips.h5 --verify --quiet
 python -c 'import bsp_fast'
 echo "wheel_check: bsp-synth --preset sample $(bc_ "$t_synth" "$t") s, bsp-convert --verify" \
      "$(bc_ "$EPOCHREALTIME" "$t_synth") s (in $PWD)"
+summary synth_s "$(bc_ "$t_synth" "$t")"
+summary convert_s "$(bc_ "$EPOCHREALTIME" "$t_synth")"
 python h5.py h5py
 python h5.py bsp_fast
 if [ -n "$EXTRAS" ]; then
   t=$EPOCHREALTIME
   python -m pip install --only-binary :all: "$WHEEL[$EXTRAS]" > pip-extras.log 2>&1 ||
     { tail -n 30 pip-extras.log >&2; exit 1; }
-  echo "wheel_check: pip install the wheel's [$EXTRAS] $(bc_ "$EPOCHREALTIME" "$t") s"
+  summary extras_s "$(bc_ "$EPOCHREALTIME" "$t")"
+  venv_mib=$(du -sm "$WORK/venv")
+  summary extras_venv_mib "${venv_mib%%[[:space:]]*}"
+  echo "wheel_check: pip install the wheel's [$EXTRAS] $(bc_ "$EPOCHREALTIME" "$t") s," \
+       "the venv ${venv_mib%%[[:space:]]*} MiB"
 fi
 python extras.py
+if torch=$(python -c 'import torch; print(torch.__version__)' 2>/dev/null); then
+  # One epoch of the demo's model (make demo) on the sample just converted: torch, Lightning
+  # and the wheel's core in one process, a checkpoint written.
+  t=$EPOCHREALTIME
+  bsp-train lifting lstm --data sample-ds --clip-length 16 --clip-offset 4 --epochs 1 \
+    --batch-size 8 --lr 1e-3 --seed 1 --threads 1 --out runs/one-epoch --force --quiet
+  test -s runs/one-epoch/checkpoints/last.ckpt
+  summary torch "$torch"
+  summary train_s "$(bc_ "$EPOCHREALTIME" "$t")"
+  echo "wheel_check: bsp-train one epoch with torch $torch $(bc_ "$EPOCHREALTIME" "$t") s"
+fi
 if python -c 'import cv2' 2>/dev/null; then
   bsp-preview clips clips.h5 --n 4 --out grid.png >/dev/null
   test -s grid.png
@@ -297,5 +327,10 @@ env -i HOME="$HOME" LANG=C.UTF-8 PATH="$WORK/bin" CC=/bin/false CXX=/bin/false \
   "$PYEXE" "$WORK/bare.py" "$WORK" "$PYEXE" "$WORK/bin/bash" -c '
     bc_() { local a=${1/./} b=${2/./}; local d=$(( (10#$a - 10#$b) / 100000 ));
             echo "$((d / 10)).$((d % 10))"; }
+    summary() { echo "$1=$2" >> "$WORK/summary"; }
     source "$WORK/payload.sh"'
 echo "wheel_check: OK in $((SECONDS - t0)) s (of which the wheel $((t_built - t0)) s)"
+if [ -n "${WHEEL_CHECK_SUMMARY:-}" ]; then
+  echo "check_s=$((SECONDS - t0))" >> "$WORK/summary"
+  cp "$WORK/summary" "$WHEEL_CHECK_SUMMARY"
+fi
