@@ -3,7 +3,8 @@
 guarantees", "House rules a parse can check"):
 
 * no import cycle between modules of ``python/bsp_fast`` (imports inside functions count:
-  a lazy import only hides a cycle);
+  a lazy import only hides a cycle), and none between the C++ stages (the folders of
+  ``cpp/src`` and ``cpp/include/bsp``, by their ``#include`` lines);
 * no module imports another module's private (``_name``) function, class or variable
   (private *modules* such as ``_native`` are the package's own and may be imported);
 * no Python function over FUNCTION_LIMIT lines, but the few of :data:`LONG_FUNCTIONS`,
@@ -149,6 +150,20 @@ def cycles(edges: dict) -> list:
     return out
 
 
+def cpp_stage_cycles() -> list:
+    """Circles between the C++ stages: a stage's files including another stage's."""
+    edges: dict = {}
+    inc = re.compile(r'#include "(?:bsp/)?([a-z0-9_]+)/')
+    for base, depth in ((ROOT / "cpp" / "src", 0), (ROOT / "cpp" / "include" / "bsp", 0)):
+        for p in base.rglob("*.[ch]pp"):
+            stage = p.relative_to(base).parts[depth]
+            for line in p.read_text(encoding="utf-8").splitlines():
+                m = inc.match(line)
+                if m and m.group(1) != stage:
+                    edges.setdefault(stage, set()).add(m.group(1))
+    return [f"C++ include cycle: {' <-> '.join(c)}" for c in cycles(edges)]
+
+
 def long_functions() -> list:
     out = []
     for p in PKG.rglob("*.py"):
@@ -217,7 +232,7 @@ def main() -> int:
     mods = _modules()
     edges, private = imports(mods)
     problems = [f"import cycle: {' <-> '.join(c)}" for c in cycles(edges)]
-    problems += private + long_functions() + renames() + seeds()
+    problems += cpp_stage_cycles() + private + long_functions() + renames() + seeds()
     for p in problems:
         print(p)
     print(f"house_check: {len(mods)} modules, {len(problems)} problem(s)")

@@ -6,7 +6,7 @@ import pkgutil as _pkgutil
 # Lets a development build tree (PYTHONPATH=python:build/dev/py) provide `_core`.
 __path__ = _pkgutil.extend_path(__path__, __name__)  # type: ignore[name-defined]
 
-__version__ = "0.1.0"
+from ._version import __version__  # noqa: E402,F401
 
 from ._native import core as _core  # noqa: E402
 from .geometry import (  # noqa: E402

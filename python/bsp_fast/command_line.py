@@ -1,14 +1,32 @@
 """What every ``bsp-*`` command shares on its command line: "did you mean" for names
-(:func:`did_you_mean`) and a help formatter that shows real defaults only
-(:class:`HelpFormatter`). Torch-free: ``--help`` and argument errors come before PyTorch is
-imported (docs/design.md, "Commands answer at once")."""
+(:func:`did_you_mean`), a help formatter that shows real defaults only
+(:class:`HelpFormatter`), one-line argument errors (:class:`ArgumentParser`) and the one
+ladder from an exception to a message and an exit code (:func:`run_command`). Torch-free:
+``--help`` and argument errors come before PyTorch is imported.
+
+Exit codes, the same for every command (docs/architecture.md, "Exit codes"):
+
+====  ==============================================================================
+0     success
+1     bad data or input file, a failed run, an I/O error, a missing optional package
+2     bad arguments or options (also an output that is one of the inputs)
+3     the output exists (``--force`` replaces it)
+4     ``bsp-convert --verify``: recordings beyond tolerance
+130   interrupted by SIGINT (143: SIGTERM); an interrupted run can be resumed
+====  ==============================================================================
+"""
 from __future__ import annotations
 
 import argparse
 import difflib
 import re
+import sys
 
-__all__ = ["did_you_mean", "unknown", "error_hint", "HelpFormatter", "ArgumentParser"]
+__all__ = ["did_you_mean", "unknown", "error_hint", "HelpFormatter", "ArgumentParser",
+           "EXIT", "exit_code", "run_command"]
+
+#: the exit codes of every command (module docstring)
+EXIT = {"ok": 0, "failure": 1, "usage": 2, "exists": 3, "verify": 4, "interrupted": 130}
 
 
 def did_you_mean(word, choices) -> str:
@@ -54,3 +72,43 @@ class ArgumentParser(argparse.ArgumentParser):
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message}{error_hint(message, self)} "
                      f"(see {self.prog} --help)\n")
+
+
+def exit_code(prog: str, exc: BaseException):
+    """Prints ``exc`` as one line ``PROG: message`` and returns its exit code, or None for
+    an exception that is no command's error (a bug: the caller re-raises it). An error
+    that carries its own ``code`` (a run's, an interruption's) keeps it."""
+    from .atomic import OutputOverlapError, refuse
+
+    if isinstance(exc, OutputOverlapError):
+        return refuse(prog, exc)
+    code = getattr(exc, "code", None)
+    if isinstance(code, int) and not isinstance(exc, SystemExit):
+        pass
+    elif isinstance(exc, FileExistsError):
+        code = EXIT["exists"]
+    elif isinstance(exc, (ValueError, argparse.ArgumentTypeError)):
+        code = EXIT["usage"]
+    elif isinstance(exc, KeyboardInterrupt):
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return EXIT["interrupted"]
+    elif isinstance(exc, (ImportError, OSError)) or type(exc).__module__.startswith("bsp_fast"):
+        code = EXIT["failure"]
+    else:
+        return None
+    text = str(exc).replace("\n", " ")
+    print(f"{prog}: {text}", file=sys.stderr)
+    return code
+
+
+def run_command(prog: str, fn, *args, **kwargs) -> int:
+    """``fn(*args, **kwargs)``'s exit code (its return value, 0 for None), or the code of
+    the error it raised, printed as one line (:func:`exit_code`)."""
+    try:
+        result = fn(*args, **kwargs)
+    except BaseException as exc:  # KeyboardInterrupt and signals' Interrupted too
+        code = exit_code(prog, exc)
+        if code is None:
+            raise
+        return code
+    return 0 if result is None else int(result)

@@ -6,7 +6,7 @@
 #include <opencv2/core/version.hpp>
 #include <opencv2/core/utility.hpp>
 
-#include "hdf5/h5.hpp"
+#include <hdf5.h>
 
 extern "C" {
 #include <libavcodec/avcodec.h>
@@ -32,7 +32,10 @@ std::map<std::string, std::string> library_versions() {
   v["libavutil"] = av_ver(avutil_version());
   v["libswscale"] = av_ver(swscale_version());
   v["opencv"] = cv::getVersionString();
-  v["hdf5"] = h5::library_version();
+  unsigned h5_major = 0, h5_minor = 0, h5_release = 0;  // the library's own, as for the others
+  H5get_libversion(&h5_major, &h5_minor, &h5_release);
+  v["hdf5"] = std::to_string(h5_major) + "." + std::to_string(h5_minor) + "." +
+              std::to_string(h5_release);
   v["eigen"] = std::to_string(EIGEN_WORLD_VERSION) + "." + std::to_string(EIGEN_MAJOR_VERSION) +
                "." + std::to_string(EIGEN_MINOR_VERSION);
   v["assimp"] = std::to_string(aiGetVersionMajor()) + "." + std::to_string(aiGetVersionMinor()) +

@@ -105,8 +105,6 @@ class Group {
   std::string path_, file_;
 };
 
-// libhdf5's version, "major.minor.release" (library_versions()).
-std::string library_version();
 
 class File {
  public:

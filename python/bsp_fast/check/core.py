@@ -79,7 +79,9 @@ def check_dataset(dataset, *, threads: int | None = None, progress: bool = False
 
 def run_check(dataset, *, threads=None, progress=False) -> tuple:
     """(report, recordings, table) - what --fix needs besides the report."""
-    from .. import num_threads
+    from .._native import core
+
+    num_threads = core.num_threads
 
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)
                                 or threads < 1):

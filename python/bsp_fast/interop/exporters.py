@@ -375,7 +375,7 @@ def export_coco(h5_path, out, *, kind: str = "annotations", images_out=None,
                 "keypoints": list(dst.joints), "skeleton": skeleton}
     import datetime
 
-    from .. import __version__
+    from .._version import __version__
 
     today = datetime.date.today()
     images_doc = {"info": {"description": f"bsp-interop export coco of {h5_path}",

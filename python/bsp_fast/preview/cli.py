@@ -169,7 +169,7 @@ def main(argv=None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as e:
         return EXIT_USAGE if e.code else EXIT_OK
-    from .. import Error
+    from .._native import core
     from ..atomic import OutputOverlapError, refuse
 
     try:
@@ -184,7 +184,7 @@ def main(argv=None) -> int:
     except (ValueError, FileNotFoundError, FileExistsError) as e:
         print(f"bsp-preview: {e}", file=sys.stderr)
         return EXIT_USAGE
-    except (Error, OSError, KeyError) as e:
+    except (core.Error, OSError, KeyError) as e:
         print(f"bsp-preview: {type(e).__name__}: {e}", file=sys.stderr)
         return EXIT_ERROR
     w, h = res["size"]

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..command_line import ArgumentParser
 from ..training import config as C
-from ..command_line import unknown
+from ..command_line import run_command, unknown
 from ..training.overrides import NOT_OVERRIDES
 from ..training.runs import RunError
 from .runner import add_options, run_table
@@ -82,6 +82,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also the test breakdown of every row (bsp-eval --breakdown: per joint, "
                         "size or distance bin, profile, missing joints), mean ± std over seeds: "
                         "breakdown.md, breakdown.json and bar figures beside results.md")
+    p.add_argument("--estimate", action="store_true",
+                   help="train nothing: time a short probe of every row on this machine and "
+                        "print its CPU minutes per seed and the table's total against the "
+                        "8 CPU hours a quick table must fit on an AVX2-only core (seeds: "
+                        "--seeds N, else the table file's registered count; "
+                        "docs/reproduce.md, 'Estimate')")
     add_options(p)  # --seeds, --split-seeds, --jobs
     return p
 
@@ -110,24 +116,27 @@ def main(argv=None) -> int:
     ns = parser.parse_args(argv)
     if ns.publish and ns.dry_run:
         parser.error("--publish copies a finished table: not with --dry-run")
-    try:  # every argument and input checked before PyTorch is imported
-        tab = load_table(ns.table)
-        overrides = parse_set(ns.set)
-        if not Path(ns.data).exists():
-            raise RunError(f"--data {ns.data}: no such dataset directory or HDF5 file")
-    except (C.ConfigError, ValueError) as exc:
-        print(f"bsp-reproduce: {exc}", file=sys.stderr)
-        return 2
-    except RunError as exc:
-        print(f"bsp-reproduce: {exc}", file=sys.stderr)
-        return exc.code
+    return run_command("bsp-reproduce", _main, ns)
+
+
+def _main(ns) -> int:
+    # every argument and input checked before PyTorch is imported
+    tab = load_table(ns.table)
+    overrides = parse_set(ns.set)
+    if not Path(ns.data).exists():
+        raise RunError(f"--data {ns.data}: no such dataset directory or HDF5 file")
+    if ns.estimate:
+        from .estimate import main_estimate
+
+        return main_estimate(tab, ns.data, ns.budget, seeds=ns.seeds if ns.seeds > 1 else None,
+                             rows=[r.strip() for r in (ns.rows or "").split(",") if r.strip()]
+                             or None, overrides=overrides, out=ns.out)
     from ..training.stopping import Interrupted, signals
     from .report import write_report
 
-    try:
-        rows = [r.strip() for r in ns.rows.split(",") if r.strip()] if ns.rows else None
-        seeds = None if ns.seeds == 1 and not ns.split_seeds else ns.seeds
-        # SIGTERM/SIGINT: Interrupted here; the runs in worker processes get SIGTERM and
+    rows = [r.strip() for r in ns.rows.split(",") if r.strip()] if ns.rows else None
+    seeds = None if ns.seeds == 1 and not ns.split_seeds else ns.seeds
+    try:  # SIGTERM/SIGINT: Interrupted here; the runs in worker processes get SIGTERM and
         # save, a run in this process saves at the end of its batch
         with signals():
             res = run_table(tab, ns.data, ns.budget, ns.out, seeds=seeds,
@@ -141,20 +150,11 @@ def main(argv=None) -> int:
                     from .readme import publish
 
                     print(f"published {publish(tab, res['dir'], ns.publish)}")
-    except Interrupted as exc:
-        print(f"bsp-reproduce: interrupted ({exc}); finished rows are kept and reused, an "
-              "interrupted row continues where it stopped when the same command is run "
-              "again", file=sys.stderr)
-        return exc.code
-    except (C.ConfigError, ValueError) as exc:
-        print(f"bsp-reproduce: {exc}", file=sys.stderr)
-        return 2
-    except RunError as exc:
-        print(f"bsp-reproduce: {exc}", file=sys.stderr)
-        return exc.code
-    except KeyboardInterrupt:
-        print("bsp-reproduce: interrupted (finished rows are kept and reused)", file=sys.stderr)
-        return 130
+    except (Interrupted, KeyboardInterrupt) as exc:
+        print("bsp-reproduce: interrupted; finished rows are kept and reused, an interrupted "
+              "row continues where it stopped when the same command is run again",
+              file=sys.stderr)
+        return getattr(exc, "code", 130)
     return 0
 
 

@@ -109,7 +109,7 @@ def main(argv=None) -> int:
 
 
 def _generate(args, client) -> int:
-    from .. import Error
+    from .._native import core
     from .generate import generate
 
     try:
@@ -126,7 +126,7 @@ def _generate(args, client) -> int:
     except (ValueError, FileNotFoundError) as e:
         print(f"bsp-synth: {e}", file=sys.stderr)
         return EXIT_USAGE
-    except Error as e:
+    except core.Error as e:
         print(f"bsp-synth: {type(e).__name__}: {e}", file=sys.stderr)
         return EXIT_ERROR
     except KeyboardInterrupt:

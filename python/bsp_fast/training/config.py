@@ -9,7 +9,7 @@ line (``training.train.resolve_config``; docs/design.md says why ``--config`` is
 ``ActionConfigFile``).
 
 Adding an option is one entry in ``OPTIONS``: ``_o(name, kind, default, help, group,
-...)``, where ``kind`` names a converter of ``KINDS`` (:mod:`bsp_fast.option_kinds`) or is a
+...)``, where ``kind`` names a converter of ``KINDS`` (:mod:`bsp_fast.training.option_kinds`) or is a
 function ``value -> value`` that raises :class:`ConfigError` (or ``ValueError``) for a bad
 value. The same entry is an override of ``bsp-reproduce`` (every option but the run's
 identity) and, with ``scoring=True``, of ``bsp-eval`` and ``bsp-predict``
@@ -26,7 +26,7 @@ from ..data import mix_tables  # mixing tables (no torch)
 from ..command_line import did_you_mean
 from ..defaults import SEED
 from ..models import catalogue  # the registered models, without torch
-from ..option_kinds import KINDS, ConfigError, parse_hp  # value converters, re-exported
+from .option_kinds import KINDS, ConfigError, parse_hp  # the value converters
 from .tasks import TASKS, get_task  # the task registry (no torch)
 
 __all__ = ["OPTIONS", "BY_NAME", "KINDS", "ConfigError", "defaults", "parser",

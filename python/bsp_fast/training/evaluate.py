@@ -12,15 +12,15 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..command_line import ArgumentParser, HelpFormatter
+from ..command_line import ArgumentParser, HelpFormatter, run_command
 from . import config as C
 from .._plain_progress import FALLBACK_NOTE, readable
 from .overrides import add_overrides, given_overrides
-from ..atomic import OutputOverlapError, refuse
 from .runs import RunError, check_run_outputs, open_run, resolve_checkpoint, run_inputs, \
     write_json
 
-__all__ = ["evaluate", "breakdown", "main", "EvalResult", "load_run", "prepare_scoring"]
+__all__ = ["evaluate", "breakdown", "main", "EvalResult", "load_run", "run_config",
+           "prepare_scoring"]
 
 SPLIT_STAGES = {"test": "test", "val": "validate"}
 
@@ -43,11 +43,23 @@ class EvalResult:
 
 def load_run(run, which: str = "best", data=None, **overrides):
     """``(saved, cfg, ckpt, h5)`` of a run directory or checkpoint: the rebuilt net
-    (:class:`~bsp_fast.training.scorer.SavedModel`), its
-    saved config with ``overrides`` (bsp-train option names) applied, and the data to read
-    (``data``, else the run's dataset folder if it still exists, so its conversion is
-    compared with its data.csv, else the HDF5 file the run used if it still exists, else
-    its ``data``)."""
+    (:class:`~bsp_fast.training.scorer.SavedModel`) and :func:`run_config`'s answer."""
+    cfg, ckpt, h5 = run_config(run, which, data, **overrides)
+    from .scorer import load_saved  # torch: once the run is known to exist
+
+    try:
+        saved = load_saved(ckpt)
+    except ValueError as exc:
+        raise RunError(str(exc)) from None
+    return saved, cfg, ckpt, h5
+
+
+def run_config(run, which: str = "best", data=None, **overrides) -> tuple:
+    """``(cfg, ckpt, h5)`` of a run directory or checkpoint: its saved config with
+    ``overrides`` (bsp-train option names) applied and the precision it trained in, and
+    the data to read (``data``, else the run's dataset folder if it still exists, so its
+    conversion is compared with its data.csv, else the HDF5 file the run used if it still
+    exists, else its ``data``)."""
     opened = open_run(run, which)
     ckpt, run_dir, info = opened["ckpt"], opened["run_dir"], opened["info"]
     cfg = C.defaults()
@@ -75,13 +87,7 @@ def load_run(run, which: str = "best", data=None, **overrides):
             h5 = used
     if cfg.get("data") is None and h5 is None:
         raise RunError(f"{ckpt}: the checkpoint names no data; pass --data")
-    from .scorer import load_saved  # torch: once the run is known to exist
-
-    try:
-        saved = load_saved(ckpt)
-    except ValueError as exc:
-        raise RunError(str(exc)) from None
-    return saved, cfg, ckpt, h5
+    return cfg, ckpt, h5
 
 
 def prepare_scoring(cfg: dict, saved) -> str:
@@ -153,7 +159,7 @@ def breakdown(run, data=None, *, which: str = "best", save: bool = False, **opti
     distance bin, profile, missing-joint count; counts that add up to ``totals``), with
     ``checkpoint``, ``model`` and the run's overall ``metrics``. ``save=True`` also
     writes it to ``RUN/test_breakdown.json`` (a run directory is needed)."""
-    from .breakdown_format import to_json
+    from ..reporting.breakdown import to_json
     from .eval_breakdown import BreakdownCollector, build_breakdown
     from .runs import BREAKDOWN_FILE as FILE
 
@@ -218,6 +224,9 @@ def _parser() -> argparse.ArgumentParser:
                         "seeded per clip; needs a file with context crops")
     p.add_argument("--json", default=None, metavar="FILE", help="also write the metrics here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--print-config", action="store_true",
+                   help="print the run's config with the options given here applied (YAML, "
+                        "usable as bsp-train --config) and exit")
     # how the run is scored: bsp-train's own declarations (training/config.py, scoring=True)
     p.set_defaults(overrides=add_overrides(p, "scoring"))
     return p
@@ -225,39 +234,39 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
-    try:
-        if args.table:
-            from .tables import runs_table
+    return run_command("bsp-eval", _main, args)
 
-            if args.format == "json" or args.breakdown:
-                raise C.ConfigError("--table prints markdown or csv, without --breakdown")
-            print(runs_table(args.runs, "markdown" if args.format == "md" else args.format,
-                             args.split))
-            return 0
-        if len(args.runs) != 1:
-            raise C.ConfigError("evaluate one run or checkpoint at a time (or use --table)")
-        if args.format == "json" and not args.breakdown:
-            raise C.ConfigError("--format json applies to --breakdown only")
-        if args.save and not args.breakdown:
-            raise C.ConfigError("--save writes the breakdown: add --breakdown")
-        _check_outputs(args)
-        if args.breakdown:
-            return _print_breakdown(args)
-        res = evaluate(args.runs[0], args.split, args.data, which=args.which,
-                       quiet=args.quiet, box_noise=args.box_noise,
-                       **given_overrides(args, args.overrides))
-    except OutputOverlapError as exc:  # --json is an input, --force or not
-        return refuse("bsp-eval", exc)
-    except (C.ConfigError, ValueError) as exc:
-        print(f"bsp-eval: {exc}", file=sys.stderr)
-        return 2
-    except RunError as exc:
-        print(f"bsp-eval: {exc}", file=sys.stderr)
-        return exc.code
-    doc = {"task": res.task, "model": res.model, "split": res.split,
-           "checkpoint": str(res.checkpoint), args.split: res.metrics}
+
+def _main(args) -> int:
+    if args.table:
+        from ..reporting.run_tables import runs_table
+        from .runs import read_finished
+        from .tasks import TABLE_COLUMNS
+
+        if args.format == "json" or args.breakdown:
+            raise C.ConfigError("--table prints markdown or csv, without --breakdown")
+        print(runs_table(read_finished(args.runs, args.split), TABLE_COLUMNS,
+                         "markdown" if args.format == "md" else args.format, args.split))
+        return 0
+    if len(args.runs) != 1:
+        raise C.ConfigError("evaluate one run or checkpoint at a time (or use --table)")
+    if args.format == "json" and not args.breakdown:
+        raise C.ConfigError("--format json applies to --breakdown only")
+    if args.save and not args.breakdown:
+        raise C.ConfigError("--save writes the breakdown: add --breakdown")
+    if args.print_config:
+        cfg = run_config(args.runs[0], args.which, args.data,
+                         **given_overrides(args, args.overrides))[0]
+        print(C.dump(cfg), end="")
+        return 0
+    _check_outputs(args)
+    if args.breakdown:
+        return _print_breakdown(args)
+    res = evaluate(args.runs[0], args.split, args.data, which=args.which, quiet=args.quiet,
+                   box_noise=args.box_noise, **given_overrides(args, args.overrides))
     if args.json:
-        write_json(doc, args.json)
+        write_json({"task": res.task, "model": res.model, "split": res.split,
+                    "checkpoint": str(res.checkpoint), args.split: res.metrics}, args.json)
     print(f"{res.task} / {res.model}: {res.split} metrics of {res.checkpoint}")
     print(f"  scored {res.clips} clips of {res.recordings} recordings"
           + (f" (--limit-batches {args.limit_batches})"
@@ -288,7 +297,8 @@ def _check_outputs(args) -> None:
 
 
 def _print_breakdown(args) -> int:
-    from .breakdown_format import format_breakdown
+    from ..reporting.breakdown import format_breakdown, run_heading
+    from .tasks import metric_formats
 
     if args.split != "test":
         raise C.ConfigError("--breakdown scores the test split; leave out --split")
@@ -298,9 +308,9 @@ def _print_breakdown(args) -> int:
     if args.json:
         write_json({"task": doc["task"], "model": doc["model"], "split": "test",
                     "checkpoint": doc["checkpoint"], "test": doc["metrics"]}, args.json)
-    heading = f"{doc['task']} / {doc['model']}: test breakdown of {doc['checkpoint']}"
-    print(format_breakdown(doc, "md" if args.format == "markdown" else args.format,
-                           heading=heading))
+    print(format_breakdown(doc, metric_formats(),
+                           "md" if args.format == "markdown" else args.format,
+                           heading=run_heading(doc)))
     return 0
 
 

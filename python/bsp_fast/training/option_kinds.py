@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from .data import mix_tables  # mixing tables (no torch)
+from ..data import mix_tables  # mixing tables (no torch)
 
 __all__ = ["ConfigError", "KINDS", "parse_hp"]
 

@@ -29,10 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..command_line import ArgumentParser, HelpFormatter
+from ..command_line import ArgumentParser, HelpFormatter, run_command
 from . import config as C
 from .overrides import add_overrides, given_overrides
-from ..atomic import OutputOverlapError, atomic_output, refuse
+from ..atomic import atomic_output
 from .runs import RunError, check_run_outputs, run_inputs
 
 __all__ = ["predict", "main", "PredictResult"]
@@ -156,7 +156,7 @@ def main(argv=None) -> int:
                "docs/training.md",
         formatter_class=HelpFormatter)
     p.add_argument("run", metavar="RUN_OR_CKPT", help="run directory or .ckpt")
-    p.add_argument("--out", required=True, metavar="PREDS.h5", help="HDF5 file to write")
+    p.add_argument("--out", metavar="PREDS.h5", help="HDF5 file to write (required)")
     p.add_argument("--data", default=None, metavar="DATASET_OR_H5",
                    help="data to predict on (default: the run's)")
     p.add_argument("--split", default="test", choices=("test", "val"),
@@ -165,21 +165,26 @@ def main(argv=None) -> int:
                    help="checkpoint of a run directory")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--print-config", action="store_true",
+                   help="print the run's config with the options given here applied (YAML, "
+                        "usable as bsp-train --config) and exit")
     # how the run is scored: bsp-train's own declarations (training/config.py, scoring=True)
     names = add_overrides(p, "scoring")
     args = p.parse_args(list(sys.argv[1:] if argv is None else argv))
-    try:
-        res = predict(args.run, args.out, args.data, split=args.split, which=args.which,
-                      force=args.force, progress=not args.quiet,
-                      **given_overrides(args, names))
-    except OutputOverlapError as exc:  # --out is an input, --force or not
-        return refuse("bsp-predict", exc)
-    except (C.ConfigError, ValueError) as exc:
-        print(f"bsp-predict: {exc}", file=sys.stderr)
-        return 2
-    except RunError as exc:
-        print(f"bsp-predict: {exc}", file=sys.stderr)
-        return exc.code
+    return run_command("bsp-predict", _main, args, names)
+
+
+def _main(args, names) -> int:
+    if args.print_config:
+        from .evaluate import run_config
+
+        cfg = run_config(args.run, args.which, args.data, **given_overrides(args, names))[0]
+        print(C.dump(cfg), end="")
+        return 0
+    if args.out is None:
+        raise C.ConfigError("--out PREDS.h5 is required (the HDF5 file to write)")
+    res = predict(args.run, args.out, args.data, split=args.split, which=args.which,
+                  force=args.force, progress=not args.quiet, **given_overrides(args, names))
     if not args.quiet:
         print(f"wrote {res.path}: {res.clips} {res.split} clips of {res.recordings} "
               f"recordings, {res.task}/{res.model} ({', '.join(res.datasets)})")

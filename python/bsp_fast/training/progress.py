@@ -18,8 +18,7 @@ class PlainProgress(ProgressBar):
     """One line per ``interval`` seconds of training (epoch, batch, loss, elapsed time) and
     one at the end of each epoch with its logged metrics (its own ``train/loss``, logged by
     the module's ``on_train_epoch_end`` after every callback's, and the ``val/`` metrics of
-    its validation); with ``trainer.predict`` (bsp-predict), a line per ``interval`` and
-    one at the end; no carriage returns."""
+    its validation); no carriage returns."""
 
     def __init__(self, interval: float = INTERVAL, stream=None):
         super().__init__()
@@ -90,31 +89,6 @@ class PlainProgress(ProgressBar):
         self._last = time.perf_counter()
         self._say(f"{self._pending} done" + (f": {values}" if values else ""))
         self._pending, self._validated = None, False
-
-    # ------------------------------------------------------ bsp-predict
-    def _loop_start(self) -> None:
-        self._last = time.perf_counter()
-        self._t0 = self._t0 or self._last
-        self._batches = 0
-
-    def _loop_batch(self, what: str, batch_idx: int, batches, dataloader_idx: int) -> None:
-        self._batches += 1
-        total = batches[dataloader_idx] if isinstance(batches, list) else batches
-        now = time.perf_counter()
-        if now - self._last >= self.interval:
-            self._last = now
-            self._say(f"{what}, batch {batch_idx + 1}/{total}")
-
-    def on_predict_start(self, trainer, pl_module) -> None:
-        self._loop_start()
-
-    def on_predict_batch_end(self, trainer, pl_module, outputs, batch, batch_idx,
-                             dataloader_idx=0) -> None:
-        self._loop_batch("predicting", batch_idx, trainer.num_predict_batches,
-                         dataloader_idx)
-
-    def on_predict_end(self, trainer, pl_module) -> None:
-        self._say(f"predicting done: {self._batches} batch(es)")
 
 
 def progress_callbacks(quiet: bool, stream=None) -> list:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -105,16 +106,34 @@ def _precision(saved: SavedModel, precision: str, device):
 
 
 def _batches(loader, limit: int, desc: str, progress: bool):
-    """The loader's first ``limit`` batches (0: all), with a bar on a terminal."""
+    """The loader's first ``limit`` batches (0: all): with ``progress``, a bar on a
+    terminal, else (a log file, a pipe) a plain line every few seconds and one at the end,
+    ``[  1.2 s] predicting done: 3 batch(es)``."""
     import itertools
 
     batches = itertools.islice(loader, limit or None)
-    if not (progress and sys.stderr.isatty()):
+    if not progress:
         return batches
-    from tqdm import tqdm
-
     total = min(len(loader), limit) if limit else len(loader)
-    return tqdm(batches, total=total, desc=desc, file=sys.stderr, leave=False)
+    if sys.stderr.isatty():
+        from tqdm import tqdm
+
+        return tqdm(batches, total=total, desc=desc, file=sys.stderr, leave=False)
+    return _plain_lines(batches, desc, total)
+
+
+def _plain_lines(batches, desc: str, total: int):
+    from .._plain_progress import INTERVAL, stamp
+
+    t0 = last = time.perf_counter()
+    done = 0
+    for batch in batches:
+        yield batch
+        done += 1
+        if time.perf_counter() - last >= INTERVAL:
+            last = time.perf_counter()
+            print(stamp(t0, f"{desc}, batch {done}/{total}"), file=sys.stderr, flush=True)
+    print(stamp(t0, f"{desc} done: {done} batch(es)"), file=sys.stderr, flush=True)
 
 
 def score(saved: SavedModel, loader, precision: str, device, *, per_recording: bool = True,

@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import config as C
-from ..command_line import error_hint
-from ..atomic import OutputOverlapError, atomic_output, refuse, remove
+from ..command_line import error_hint, run_command
+from ..atomic import atomic_output, remove
 from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, is_temporary, \
     open_run, read_marker, read_run, refuse_unsafe_output, resume_hint, write_json, \
     write_marker
@@ -297,7 +297,8 @@ def _initial(cfg: dict, dm, model=None) -> dict:
 
 def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds,
             tested: str = "best", precision_reason: str | None = None):
-    from .curves import plot_curves, read_logs
+    from ..reporting.curves import plot_curves
+    from .logs import read_logs
     from .stopping import OutputWriteError
 
     test = dict(trainer.lightning_module.results.get("test", {}))
@@ -329,8 +330,9 @@ def _finish(cfg, tmp: Path, final: Path, trainer, initial, precision, seconds,
         _write_config(cfg, tmp, precision, h5=trainer.datamodule.h5_path,
                       hparams=metrics["hparams"], world_size=metrics["world_size"],
                       precision_reason=precision_reason)
-        plot_curves(tmp, cfg["task"], initial=initial.get("val"),
-                    title=f"{cfg['task']} / {cfg['model']}", best_epoch=best_epoch)
+        plot_curves(logs, get_task(cfg["task"]).curve_metrics, tmp / "curves.png",
+                    initial=initial.get("val"), title=f"{cfg['task']} / {cfg['model']}",
+                    best_epoch=best_epoch)
         remove(tmp / MARKER)  # the run is complete
     except OSError as exc:
         remove(tmp / "metrics.json")  # no metrics.json: nothing takes it for finished
@@ -351,7 +353,7 @@ def _write_config(cfg: dict, tmp: Path, precision: str, **resolved) -> None:
     import lightning
     import torch
 
-    from .. import __version__
+    from .._version import __version__
     extra = {"resolved": {"precision": precision,
                           "data": str(Path(cfg["data"]).absolute()),
                           "out": str(Path(cfg["out"]).absolute()),
@@ -416,53 +418,52 @@ def build_parser():
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    try:
-        parser = build_parser()
-    except ImportError as exc:  # jsonargparse, of the 'torch' extra
-        print(f"bsp-train: {exc}", file=sys.stderr)
-        return 1
+    return run_command("bsp-train", _main, argv)
+
+
+def _main(argv) -> int:
+    parser = build_parser()  # an ImportError names the 'torch' extra (jsonargparse)
     try:
         cli, config_path, print_config = C.parse_command_line(parser, argv)
-        if print_config:
-            print(C.dump(resolve_config(cli, config_path)[0]), end="")
-            return 0
-        result = _train(cli, config_path)
     except argparse.ArgumentError as exc:  # one line, as every command's (command_line)
-        print(f"bsp-train: error: {exc}{error_hint(str(exc), parser)} (see bsp-train "
-              "--help)", file=sys.stderr)
-        return 2
-    except OutputOverlapError as exc:  # --out is or holds an input, --force or not
-        return refuse("bsp-train", exc)
-    except C.ConfigError as exc:
-        print(f"bsp-train: {exc}", file=sys.stderr)
-        return 2
-    except RunError as exc:
-        print(f"bsp-train: {exc}", file=sys.stderr)
-        return exc.code
+        raise C.ConfigError(f"error: {exc}{error_hint(str(exc), parser)} (see bsp-train "
+                            "--help)") from None
+    if print_config:
+        print(C.dump(resolve_config(cli, config_path)[0]), end="")
+        return 0
+    try:
+        result = _train(cli, config_path)
     except KeyboardInterrupt:
         print("bsp-train: interrupted; nothing written", file=sys.stderr)
         return 130
     except BaseException as exc:  # SIGINT/SIGTERM (Interrupted) or a full disk
-        from .stopping import Interrupted, OutputWriteError
-
-        if not isinstance(exc, (Interrupted, OutputWriteError)):
-            raise
-        # where the stopped run was left (an incomplete run) and how to continue it
-        left = getattr(getattr(exc, "run", None), "left_in", None)
-        if isinstance(exc, Interrupted):
-            where = f" at {resume_hint(left)}" if left else "; nothing written"
-            print(f"bsp-train: interrupted ({exc}){where}", file=sys.stderr)
-            return exc.code
-        where = f"; the run is left at {resume_hint(left)}" if left else "; nothing written"
-        print(f"bsp-train: {exc.strerror}{where}", file=sys.stderr)
-        return 1
+        return _stopped(exc)
     if result is None:  # a DDP process started by Lightning
         return 0
-    from .tables import runs_table  # printed with --quiet too: the result of the command
+    from ..reporting.run_tables import runs_table  # printed with --quiet too: the result
+    from .runs import read_finished
+    from .tasks import TABLE_COLUMNS
 
-    print(runs_table([result.run_dir]))
+    print(runs_table(read_finished([result.run_dir]), TABLE_COLUMNS))
     print(f"wrote {result.run_dir}")
     return 0
+
+
+def _stopped(exc: BaseException) -> int:
+    """A run stopped by a signal or a full disk: where it was left and how to continue it;
+    other errors go on to the commands' one ladder (command_line.exit_code)."""
+    from .stopping import Interrupted, OutputWriteError
+
+    if not isinstance(exc, (Interrupted, OutputWriteError)):
+        raise exc
+    left = getattr(getattr(exc, "run", None), "left_in", None)
+    if isinstance(exc, Interrupted):
+        where = f" at {resume_hint(left)}" if left else "; nothing written"
+        print(f"bsp-train: interrupted ({exc}){where}", file=sys.stderr)
+        return exc.code
+    where = f"; the run is left at {resume_hint(left)}" if left else "; nothing written"
+    print(f"bsp-train: {exc.strerror}{where}", file=sys.stderr)
+    return 1
 
 
 if __name__ == "__main__":

@@ -1,0 +1,3 @@
+"""The package's version, in a module of its own so that any module can name it without
+importing the package root (which imports them)."""
+__version__ = "0.1.0"
