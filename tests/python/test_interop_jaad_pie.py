@@ -31,7 +31,9 @@ def _xml_track(label, pid, frames, k, cross=None, outside_last=False):
         if cross is not None:
             c = "crossing" if cross and f >= cross else "not-crossing"
             attrs += (f'<attribute name="cross">{c}</attribute><attribute name="action">walking'
-                      '</attribute><attribute name="look">not-looking</attribute>')
+                      '</attribute><attribute name="look">not-looking</attribute>'
+                      + "".join(f'<attribute name="{n}">__undefined__</attribute>'
+                                for n in ("nod", "hand_gesture", "reaction", "gesture")))
         boxes.append(f'<box frame="{f}" keyframe="1" occluded="0" outside="{out}" xtl="{x1}" '
                      f'ytl="{y1}" xbr="{x2}" ybr="{y2}">{attrs}</box>')
     return f'<track label="{label}">{"".join(boxes)}</track>'

@@ -8,7 +8,8 @@ from pathlib import Path
 
 from .readers import BadInput
 
-__all__ = ["parse_xml", "video_size", "box_record", "track_boxes", "crossing_attributes"]
+__all__ = ["parse_xml", "video_size", "box_record", "track_boxes", "check_values",
+           "crossing_attributes"]
 
 
 def parse_xml(path, what: str):
@@ -60,6 +61,20 @@ def track_boxes(path, n: int, track) -> tuple:
         raise BadInput(f"{path}: track[{n}] (frame {boxes[0][0]}): no <attribute "
                        "name=\"id\">; nothing written")
     return boxes, pid
+
+
+def check_values(path, n: int, pid: str, boxes: list, allowed: dict, tool: str) -> None:
+    """Every box of the ``n``-th track of ``path`` has each attribute of ``allowed``
+    (``{name: values}``) with one of its values, as the official ``tool`` maps them
+    (its ``_map_text_to_scalar``, which stops with a KeyError on any other value)."""
+    for frame, _, _, attrs in boxes:
+        for name, values in allowed.items():
+            value = attrs.get(name)
+            if value not in values:
+                got = "no such attribute" if value is None else f"{value!r}"
+                raise BadInput(f"{path}: track[{n}] (pedestrian {pid!r}) frame {frame}: "
+                               f"{name}: {got}, not one of {', '.join(values)} (as {tool} "
+                               "reads it); nothing written")
 
 
 def crossing_attributes(path, what: str) -> dict:

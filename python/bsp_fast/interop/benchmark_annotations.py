@@ -1,37 +1,28 @@
-"""What the JAAD and PIE importers share (:mod:`.jaad`, :mod:`.pie`): annotated tracks cut
-as the PedestrianActionBenchmark cuts them, 2D poses joined to the annotated boxes
-(OpenPose JSON or the benchmark's pose pickles), and the clip file.
-
-The benchmark (``action_predict.py``, ``get_data_sequence``): each pedestrian's track is
-cut to end at its event frame; windows of ``obs_length`` frames start at positions
-``len - obs - tte_max`` ... ``len - obs - tte_min`` every ``max(1, int((1 - overlap) *
-obs))`` positions (all splits), so a window's last frame lies ``tte_min`` to ``tte_max``
-frames before the event; every window of a track has the track's label (crossing = the
-pedestrian crosses at the event). Tracks shorter than ``obs + tte_max`` are left out.
-Here the kept frames of each track go through :func:`write_clip_file` (the core's planner
-with clip length ``obs`` and that stride, label ``last`` on a constant per-frame label:
-the same windows), then the clips are regrouped into the dataset's own split.
+"""What the JAAD and PIE importers share (:mod:`.jaad`, :mod:`.pie`): annotated tracks, 2D
+poses joined to the annotated boxes (OpenPose JSON or the benchmark's pose pickles), and
+the import itself: the tracks cut into the PedestrianActionBenchmark's windows and
+written to a clip file by :mod:`.benchmark_windows` (which says how the benchmark cuts
+them: by position, every window of a track with the track's label).
 """
 from __future__ import annotations
 
 import json
 import re
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..atomic import atomic_output
-from ..skeletons import CARLA, joint_set, skeleton_map
-from .clipfile import write_clip_file
-from .readers import BadInput, Detections, load_json
+from ..skeletons import CARLA, joint_set
+from .benchmark_windows import SPLITS, seeded_split, track_windows, write_windows
+from .clipfile import clip_settings, map_joints
+from .readers import BadInput, load_json
 from .safe_pickle import RefusedPickle, load_file
 
-__all__ = ["Track", "window_stride", "import_tracks",
-           "SPLITS", "BENCHMARK"]
+__all__ = ["Track", "window_stride", "import_tracks", "refuse_existing", "SPLITS",
+           "BENCHMARK"]
 
-SPLITS = ("train", "val", "test")
 #: the benchmark's defaults: observation length, time to event (frames), overlap per dataset
 BENCHMARK = dict(obs_length=16, tte=(30, 60), overlap={"jaad": 0.8, "pie": 0.6})
 #: OpenPose COCO-18 (the benchmark's pose pickles: nose, neck, Rsho, Relb, Rwri, Lsho,
@@ -46,19 +37,26 @@ _SET = re.compile(r"^set\d+$")
 class Track:
     """One annotated pedestrian: ``frames`` and ``boxes`` (x1, y1, x2, y2) in file order,
     ``label`` (1: crosses at the event), ``end`` the index of the event frame in
-    ``frames`` (None: left out, ``skip`` says why), ``split`` (None: the seeded split),
-    ``use`` False for tracks only kept to resolve which pose belongs to whom."""
+    ``frames`` (the benchmark's sequence ends there; below 0: nothing left), ``split``
+    (None: the seeded split), ``use`` False for tracks only kept to resolve which pose
+    belongs to whom."""
 
     video: str
     pid: str
     frames: list
     boxes: list
     label: int
-    end: int | None
+    end: int
     split: str | None
     where: str
     use: bool = True
-    skip: str = ""
+
+
+def refuse_existing(out, force: bool) -> None:
+    """An existing output without ``force`` is refused before any input is read (a full
+    dataset takes minutes to read)."""
+    if not force and Path(out).exists():
+        raise FileExistsError(f"{out} exists; pass --force to replace it")
 
 
 def window_stride(overlap: float, obs_length: int) -> int:
@@ -82,9 +80,14 @@ def _body25(coco18: np.ndarray, derive: bool) -> tuple:
 
 class PickledPoses:
     """The benchmark's pose pickles: ``pose_<set>.pkl`` = ``{video: {"<frame:05d>_<pid>":
-    36 values}}``, the 18 COCO-18 joints' (x, y) normalised by the image size (values <= 1;
-    pixels where a file holds larger ones), (0, 0) where missing. ``path``: one file or a
-    folder of them; ``video_key(set, video)`` names the video as the annotations do."""
+    36 values}}``, the 18 COCO-18 joints' (x, y), (0, 0) where missing. ``path``: one
+    file or a folder of them; ``video_key(set, video)`` names the video as the annotations
+    do. The benchmark's own pickles hold coordinates normalised by the image size; some
+    tools write pixels. Decided per video: normalised when at most half of its non-zero
+    coordinates exceed 1 (values above 1 then lie outside the image, and are counted in
+    ``warnings``), else pixels (values beyond the image size counted likewise). A pose
+    whose 36 values are all 0 is a pose without any joint (every joint missing), counted
+    in ``all_zero``."""
 
     def __init__(self, path, video_key, derive: bool = True):
         path = Path(path)
@@ -93,6 +96,7 @@ class PickledPoses:
             raise BadInput(f"{path}: no pose pickle (*.pkl) there; nothing written")
         self.poses, self.units, self.derive, self.name = {}, {}, derive, str(path)
         self.body25 = set(COCO18_TO_BODY25) | ({8} if derive else set())
+        self.all_zero, self.warnings = 0, []
         for f in files:
             try:
                 doc = load_file(f)
@@ -101,41 +105,63 @@ class PickledPoses:
             if not isinstance(doc, dict):
                 raise BadInput(f"{f}: expected a dict of videos, got {type(doc).__name__}; "
                                "nothing written")
-            set_id, top, videos = f.stem.split("_")[-1], 0.0, []
+            set_id = f.stem.split("_")[-1]
             for video, items in doc.items():
-                if not isinstance(items, dict):
-                    raise BadInput(f"{f}: video {video!r}: expected a dict of "
-                                   "'<frame>_<pid>' keys; nothing written")
-                videos.append(video_key(set_id, str(video)))
-                table = self.poses.setdefault(videos[-1], {})
-                for key, value in items.items():
-                    frame, _, pid = str(key).partition("_")
-                    try:
-                        a = np.asarray(value, np.float64).reshape(18, 2)
-                        frame = int(frame)
-                    except (TypeError, ValueError):
-                        raise BadInput(f"{f}: video {video!r} key {key!r}: expected "
-                                       "'<frame>_<pid>' -> 36 numbers; nothing written") from None
-                    if not np.all(np.isfinite(a)):
-                        raise BadInput(f"{f}: video {video!r} key {key!r}: non-finite value; "
-                                       "nothing written")
-                    table[(frame, pid)] = a
-                    top = max(top, float(a.max(initial=0.0)))
-            self.units.update({v: "normalised" if top <= 1.0 else "pixels" for v in videos})
+                key = video_key(set_id, str(video))
+                self.poses[key] = _video_poses(f, video, items)
+                self.all_zero += sum(not a.any() for a in self.poses[key].values())
 
     def has_video(self, video: str) -> bool:
         return video in self.poses
 
+    def _unit(self, video: str, size: tuple) -> str:
+        """``normalised`` or ``pixels`` for ``video`` (decided once, with its warning)."""
+        if video not in self.units:
+            values = np.array(list(self.poses.get(video, {}).values())).reshape(-1, 2)
+            nonzero = values[values.any(1)]
+            over = int((nonzero > 1).sum())
+            unit = "pixels" if over > nonzero.size / 2 else "normalised"
+            outside = (over if unit == "normalised" else
+                       int((nonzero > np.array(size, np.float64)).sum()))
+            outside += int((nonzero < 0).sum())
+            if outside:
+                self.warnings.append(
+                    f"{self.name}: video {video!r}: read as {unit} coordinates; {outside} of "
+                    f"{nonzero.size} coordinates lie outside the image (kept as they are)")
+            self.units[video] = unit
+        return self.units[video]
+
     def poses_for(self, video: str, requests: list, size: tuple) -> list:
         """``requests``: ``[(frame, pid)]`` -> per request ``(points, conf)`` or None."""
         table = self.poses.get(video, {})
-        scale = np.array(size, np.float64) if self.units.get(video) == "normalised" else 1.0
+        scale = np.array(size, np.float64) if self._unit(video, size) == "normalised" else 1.0
         out = []
         for frame, pid in requests:
             a = table.get((frame, pid))
             out.append(None if a is None else _body25(np.where(a == 0, 0.0, a * scale),
                                                       self.derive))
         return out
+
+
+def _video_poses(f, video, items) -> dict:
+    """``{(frame, pid): (18, 2)}`` of one video of the pickle ``f``."""
+    if not isinstance(items, dict):
+        raise BadInput(f"{f}: video {video!r}: expected a dict of '<frame>_<pid>' keys; "
+                       "nothing written")
+    table = {}
+    for key, value in items.items():
+        frame, _, pid = str(key).partition("_")
+        try:
+            a = np.asarray(value, np.float64).reshape(18, 2)
+            frame = int(frame)
+        except (TypeError, ValueError):
+            raise BadInput(f"{f}: video {video!r} key {key!r}: expected '<frame>_<pid>' -> "
+                           "36 numbers; nothing written") from None
+        if not np.all(np.isfinite(a)):
+            raise BadInput(f"{f}: video {video!r} key {key!r}: non-finite value; "
+                           "nothing written")
+        table[(frame, pid)] = a
+    return table
 
 
 class OpenPoseFrames:
@@ -226,22 +252,17 @@ def match_people(boxes: list, people: list, min_fit: float = 0.5) -> list:
 
 
 # --------------------------------------------------------------------------- import
-def _kept(track: Track, obs: int, tte: tuple) -> range | None:
-    """Positions of ``track`` that the benchmark's windows use (None: too short)."""
-    n = track.end + 1  # the sequence ends at the event frame
-    if n < obs + tte[1]:
-        return None
-    return range(n - obs - tte[1], n - tte[0])
-
-
-def _join_poses(tracks: list, keep: dict, source, sizes: dict) -> tuple:
-    """Rows of the kept frames with their poses; ``(rows, frames_without_pose)``."""
+def _join_poses(tracks: list, windows: list, obs: int, source, sizes: dict) -> tuple:
+    """``({(track id, position): (points, conf)}, frames_without_pose)``: BODY_25 poses of
+    every position the windows use (zeros where none matches)."""
     by_frame: dict = {}
     for t in tracks:
         for k, fr in enumerate(t.frames):
             by_frame.setdefault((t.video, fr), []).append((t, k))
-    rows, missing = [], 0
-    needed = sorted({(t.video, t.frames[k]) for t, ks in keep.items() for k in ks})
+    wanted = {(id(w.track), w.first + k) for w in windows for k in range(obs)}
+    needed = sorted({(w.track.video, w.track.frames[w.first + k])
+                     for w in windows for k in range(obs)})
+    out, missing, empty = {}, 0, (np.zeros((25, 2)), np.zeros(25))
     for video, frame in needed:
         entries = by_frame[(video, frame)]
         if isinstance(source, OpenPoseFrames):
@@ -252,139 +273,141 @@ def _join_poses(tracks: list, keep: dict, source, sizes: dict) -> tuple:
             poses = source.poses_for(video, [(frame, t.pid) for t, _ in entries],
                                      sizes[video])
         for (t, k), pose in zip(entries, poses):
-            if t not in keep or k not in keep[t]:
-                continue
-            if pose is None:
-                missing += 1
-                pose = (np.zeros((25, 2)), np.zeros(25))
-            rows.append((t, frame, pose))
-    return rows, missing
+            if (id(t), k) in wanted:
+                missing += pose is None
+                out[(id(t), k)] = empty if pose is None else pose
+    return out, missing
+
+
+def _windows(tracks: list, obs: int, tte: tuple, stride: int, cut_gaps: bool) -> tuple:
+    """``(windows, pedestrians kept, pedestrians too short)`` of the imported tracks."""
+    windows, kept, short = [], 0, 0
+    for t in tracks:
+        if not t.use:
+            continue
+        ws = track_windows(t, obs, tte, stride, cut_gaps)
+        if ws is None:
+            short += 1
+        else:
+            kept += 1
+            windows += ws
+    return windows, kept, short
 
 
 def import_tracks(tracks: list, out, *, dataset: str, source, sizes: dict, root,
-                  obs_length: int = 16, tte=(30, 60),
-                  overlap: float = 0.6, threshold: float = 0.3, derive: bool = True,
-                  seed=None, val_frac=None, test_frac=None, force: bool = False,
-                  settings: dict | None = None) -> dict:
-    """Cuts ``tracks`` as the benchmark does, joins the poses of ``source``
-    (:class:`OpenPoseFrames` or :class:`PickledPoses`) and writes the clip file ``out``."""
-    if isinstance(obs_length, bool) or not isinstance(obs_length, int) or obs_length < 1:
-        raise ValueError(f"obs_length must be a positive integer, got {obs_length!r}")
+                  obs_length: int = 16, tte=(30, 60), overlap: float = 0.6,
+                  threshold: float = 0.3, derive: bool = True, cut_gaps: bool = False,
+                  drop_first: bool = False, seed=None, val_frac=None, test_frac=None,
+                  force: bool = False, settings: dict | None = None) -> dict:
+    """Cuts ``tracks`` as the benchmark does (:mod:`.benchmark_windows`), joins the poses
+    of ``source`` (:class:`OpenPoseFrames` or :class:`PickledPoses`) and writes the clip
+    file ``out``; returns the report."""
+    if isinstance(obs_length, bool) or not isinstance(obs_length, int) or obs_length < 2:
+        raise ValueError(f"obs_length must be an integer >= 2, got {obs_length!r}")
     tte = tuple(int(v) for v in tte)
     if len(tte) != 2 or not 0 <= tte[0] <= tte[1]:
         raise ValueError(f"tte must be (min, max) with 0 <= min <= max, got {tte!r}")
     stride = window_stride(overlap, obs_length)
-    keep, short, skipped = {}, 0, []
-    for t in tracks:
-        if not t.use:
-            continue
-        if t.end is None:
-            skipped.append(f"{t.where}: pedestrian {t.pid!r}: {t.skip}")
-            continue
-        k = _kept(t, obs_length, tte)
-        if k is None:
-            short += 1
-        else:
-            keep[t] = set(k)
-    if not keep:
+    windows, kept, short = _windows(tracks, obs_length, tte, stride, cut_gaps)
+    if not windows:
         raise BadInput(f"{root}: no pedestrian track has the {obs_length + tte[1]} frames "
-                       "before its event that a window needs; nothing written")
-    for video in sorted({t.video for t in keep}):
+                       "up to its event that a window needs; nothing written")
+    for video in sorted({w.track.video for w in windows}):
         if not source.has_video(video):
             raise BadInput(f"{source.name}: no poses for video {video!r} "
                            f"({_source_name(source)}); nothing written")
-    rows, no_pose = _join_poses(tracks, keep, source, sizes)
-    det = Detections(
-        joints="body25", video=[t.video for t, _, _ in rows], track=[t.pid for t, _, _ in rows],
-        frame=np.array([f for _, f, _ in rows], np.int64),
-        points=np.array([p[0] for _, _, p in rows], np.float64).reshape(-1, 25, 2),
-        scores=np.array([p[1] for _, _, p in rows], np.float64).reshape(-1, 25),
-        width=np.array([sizes[t.video][0] for t, _, _ in rows], np.int64),
-        height=np.array([sizes[t.video][1] for t, _, _ in rows], np.int64),
-        where=[f"{t.where} pedestrian {t.pid} frame {f}" for t, f, _ in rows], source=str(root))
-    labels = {(t.video, t.pid, f): t.label for t, f, _ in rows}
-    split_opts = {k: v for k, v in dict(seed=seed, val_frac=val_frac,
-                                        test_frac=test_frac).items() if v is not None}
-    events = {(t.video, t.pid): t.frames[t.end] for t in keep}
-    fixed = {t.video: t.split for t in keep if t.split is not None}
+    raw, no_pose = _join_poses(tracks, windows, obs_length, source, sizes)
+    keys = list(raw)
+    m, uv, visible, conf, _ = map_joints("body25", np.array([raw[k][0] for k in keys]),
+                                         np.array([raw[k][1] for k in keys]), threshold,
+                                         derive)
+    poses = {k: (uv[i], visible[i], conf[i]) for i, k in enumerate(keys)}
+    split, info = _split(windows, seed, val_frac, test_frac)
     names = joint_set("body25").joints  # CARLA joints whose BODY_25 sources the poses have
-    filled = np.array([kind != "missing" and all(names.index(n) in source.body25 for n in src)
-                       for _, kind, src in skeleton_map("body25", CARLA, derive).describe()])
-    info = dict(dataset=dataset, obs_length=obs_length, time_to_event=list(tte),
-                overlap=float(overlap), stride=stride,
-                split_rule="fixed" if fixed else "seeded by video", **(settings or {}))
-    with tempfile.TemporaryDirectory(prefix="bsp-interop-") as tmp:
-        first = write_clip_file(det, Path(tmp) / "clips.h5", labels=labels, threshold=threshold,
-                                derive=derive, skip_short=True, clip_length=obs_length,
-                                clip_offset=stride, eval_clip_offset=stride, label="last",
-                                **split_opts)
-        with atomic_output(out, force=force) as dst:
-            report = _regroup(Path(tmp) / "clips.h5", dst, fixed, events, info, filled)
-    report.update(output=str(out), rows=first["rows"], tracks=len(keep), short_tracks=short,
-                  skipped=skipped + first["skipped"], frames_without_pose=no_pose,
-                  joints=[n for n, f in zip(CARLA.joints, filled) if f], settings=info)
-    return report
+    filled = m.present & np.array([all(names.index(n) in source.body25 for n in src)
+                                   for _, _, src in m.describe()])
+    info.update(dataset=dataset, obs_length=obs_length, time_to_event=list(tte),
+                overlap=float(overlap), stride=stride, windows_across_gaps=not cut_gaps,
+                first_frame_dropped=bool(drop_first), threshold=float(threshold),
+                derive=bool(derive), root=str(root), **(settings or {}))
+    with atomic_output(out, force=force) as tmp:
+        counts = write_windows(tmp, windows, split, poses, sizes, obs=obs_length,
+                               drop_first=drop_first,
+                               attrs=_attributes(info, filled, stride, obs_length + tte[1]))
+    return _report(out, windows, split, counts, info, (kept, short, no_pose), poses, source,
+                   filled)
+
+
+def _split(windows: list, seed, val_frac, test_frac) -> tuple:
+    """Per window its split (the dataset's own where the tracks have one, else seeded
+    by video) and the settings that say which."""
+    if all(w.track.split is not None for w in windows):
+        return [w.track.split for w in windows], dict(split_rule="fixed")
+    opts = clip_settings(**{k: v for k, v in dict(seed=seed, val_frac=val_frac,
+                                                  test_frac=test_frac).items()
+                            if v is not None})
+    rule = dict(seed=opts["seed"], val_frac=float(opts["val_frac"]),
+                test_frac=float(opts["test_frac"]))
+    return seeded_split(windows, **rule), dict(split_rule="seeded by video", **rule)
+
+
+def _attributes(info: dict, filled, stride: int, min_length: int) -> dict:
+    """The root attributes: bsp-convert's names where they mean the same (``benchmark``
+    1, ``label_rule`` video: every window has its pedestrian's label), the benchmark's
+    settings, and ``settings_json`` holding the same values."""
+    settings = dict(info, benchmark=True, label="video", clip_length=info["obs_length"]
+                    - int(info["first_frame_dropped"]), clip_offset=stride,
+                    eval_clip_offset=stride, min_video_length=min_length,
+                    labels=f"{info['dataset']} attributes (crossing)", balance=False,
+                    source_joints="body25")
+    return dict(clip_stride=stride, eval_clip_stride=stride, min_video_length=min_length,
+                label_rule="video", benchmark=1, balance=0,
+                val_frac=float(info.get("val_frac", 0.0)),
+                test_frac=float(info.get("test_frac", 0.0)), seed=int(info.get("seed", 0)),
+                source_path=str(info.get("root", "")), source_format="body25",
+                joints_mapped=np.asarray(filled, np.uint8),
+                visibility_threshold=info["threshold"], labels_source=settings["labels"],
+                dataset=info["dataset"], split_rule=info["split_rule"],
+                obs_length=info["obs_length"],
+                time_to_event=np.asarray(info["time_to_event"], np.int64),
+                overlap=info["overlap"], pose_source=info.get("poses", ""),
+                windows_across_gaps=int(info["windows_across_gaps"]),
+                first_frame_dropped=int(info["first_frame_dropped"]),
+                settings_json=json.dumps(settings, sort_keys=True))
+
+
+def _report(out, windows, split, counts, info, numbers, poses, source, filled) -> dict:
+    """The import's report: counts per split, the TTE ranges, the windows across gaps,
+    the poses' notes, the missing joints per split (``--stats``)."""
+    obs, skip = info["obs_length"], int(info["first_frame_dropped"])
+    gaps = [w for w in windows
+            if w.track.frames[w.first + obs - 1] - w.track.frames[w.first] != obs - 1]
+    missing = {s: [0, 0] for s in SPLITS}
+    for w, s in zip(windows, split):
+        for k in range(w.first + skip, w.first + obs):
+            vis = poses[(id(w.track), k)][1][filled]
+            missing[s][0] += int(vis.size - vis.sum())
+            missing[s][1] += int(vis.size)
+    kept, short, no_pose = numbers
+    return dict(output=str(out), rows=len(poses), tracks=kept, short_tracks=short,
+                clips={s: n for s, (n, _) in counts.items()},
+                class_counts={s: c for s, (_, c) in counts.items()},
+                tte_range=(min(w.tte for w in windows), max(w.tte for w in windows)),
+                frames_to_event_range=(min(w.frames_to_event for w in windows),
+                                       max(w.frames_to_event for w in windows)),
+                windows_across_gaps=len(gaps),
+                pedestrians_with_gaps=sorted({f"{w.track.video}/{w.track.pid}" for w in gaps}),
+                frames_without_pose=no_pose, all_zero_poses=getattr(source, "all_zero", 0),
+                warnings=list(getattr(source, "warnings", [])),
+                missing_joints={s: tuple(v) for s, v in missing.items()},
+                joints=[n for n, f in zip(CARLA.joints, filled) if f], settings=info,
+                skipped=[])
 
 
 def _source_name(source) -> str:
     if isinstance(source, OpenPoseFrames):
         return "no VIDEO_<frame>_keypoints.json file of it"
     return "not a video of the pose pickle"
-
-
-def _regroup(src, dst, fixed: dict, events: dict, info: dict, filled) -> dict:
-    """Copies the clip file ``src`` to ``dst`` with its clips in the split ``fixed`` gives
-    their video (videos not in it keep the seeded split), ordered by (video, track,
-    start), plus ``meta/tte`` (frames from a window's last frame to the event) and the
-    benchmark's settings as attributes; ``joints_mapped`` only where the poses have the
-    joint's sources (``filled``)."""
-    import h5py
-
-    with h5py.File(src, "r") as f, h5py.File(dst, "w") as g:
-        names = []
-        f["train"].visititems(lambda n, o: names.append(n) if isinstance(o, h5py.Dataset)
-                              else None)
-        text = {n for n in names if h5py.check_string_dtype(f["train"][n].dtype)}
-        cat = {n: np.concatenate([f[s][n].asstr()[()] if n in text else f[s][n][()]
-                                  for s in SPLITS]) for n in names}
-        origin = np.concatenate([[s] * len(f[s]["labels"]) for s in SPLITS]).astype(object)
-        video, track = cat["meta/video_id"], cat["meta/pedestrian_id"]
-        split = np.array([fixed.get(v, o) for v, o in zip(video, origin)], object)
-        # int32 as bsp-convert writes it (docs/hdf5-schema.md, "Time to event")
-        cat["meta/tte"] = (np.array([events[(v, t)] for v, t in zip(video, track)], np.int64)
-                           - (cat["meta/end_frame"] - 1)).astype(np.int32)
-        for k, v in f.attrs.items():
-            g.attrs[k] = v
-        report = dict(clips={}, class_counts={}, missing_joints={})
-        mapped = np.asarray(f.attrs["joints_mapped"], bool) & filled
-        for s in SPLITS:
-            idx = np.flatnonzero(split == s)
-            idx = idx[np.lexsort((cat["meta/start_frame"][idx], track[idx].astype(str),
-                                  video[idx].astype(str)))]
-            grp = g.create_group(s)
-            for n, a in cat.items():
-                if n in text:
-                    grp.create_dataset(n, data=a[idx].tolist(), dtype=h5py.string_dtype())
-                else:
-                    grp[n] = a[idx]
-            counts = np.bincount(cat["labels"][idx], minlength=2).astype(np.int64)
-            grp.attrs["class_counts"] = counts
-            grp.attrs["recordings"] = len(set(zip(video[idx], track[idx])))
-            g.attrs[f"class_counts_{s}"] = counts
-            report["clips"][s], report["class_counts"][s] = int(len(idx)), counts.tolist()
-            vis = cat["visible"][idx][..., mapped]
-            report["missing_joints"][s] = (int(vis.size - vis.sum()), int(vis.size))
-        tte = cat["meta/tte"]
-        report["tte_range"] = (int(tte.min()), int(tte.max())) if len(tte) else None
-        settings = json.loads(f.attrs["settings_json"])
-        settings.update(info, labels=f"{info['dataset']} attributes (crossing)")
-        g.attrs.update(dict(benchmark=1, label_rule="video", labels_source=settings["labels"],
-                            settings_json=json.dumps(settings, sort_keys=True),
-                            dataset=info["dataset"], split_rule=info["split_rule"],
-                            time_to_event=np.asarray(info["time_to_event"], np.int64),
-                            overlap=info["overlap"], pose_source=info.get("poses", ""),
-                            joints_mapped=mapped.astype(np.uint8)))
-    return report
 
 
 def stats_lines(report: dict) -> list:

@@ -135,6 +135,19 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _refuse_existing(a) -> None:
+    """An existing output without --force: exit 3 before anything is read (a full dataset
+    takes minutes to read)."""
+    if a.force:
+        return
+    outs = [a.out] + [getattr(a, k, None) for k in ("out_3d", "write_images")]
+    if a.command == "export" and a.format == "coco" and a.results:
+        outs.append(a.images)
+    for out in outs:
+        if out is not None and Path(out).exists():
+            raise FileExistsError(f"{out} exists; pass --force to replace it")
+
+
 def _check_outputs(a) -> None:
     """The output rule (bsp_fast.atomic.check_outputs) for every sub-command, before any
     file is read: no output is an input, no two outputs are one file."""
@@ -187,6 +200,7 @@ def _run(a) -> str:
         return coverage_table(derive=not a.no_derive)
     _check_inputs(a)
     _check_outputs(a)
+    _refuse_existing(a)
     if a.command == "export":
         common = dict(joints=a.joints, split=a.split, derive=not a.no_derive, force=a.force)
         if a.format == "videopose3d":
@@ -257,6 +271,13 @@ def _benchmark_parsers(imp) -> None:
                        "frame to the event (default 30 60)")
         q.add_argument("--overlap", type=float, default=BENCHMARK["overlap"][name],
                        help=f"window overlap (default {BENCHMARK['overlap'][name]})")
+        q.add_argument("--cut-gaps", action="store_true",
+                       help="leave out the windows that span a gap in a track's frame "
+                       "numbers (default: windows by position, as the benchmark cuts them)")
+        q.add_argument("--drop-first-frame", action="store_true",
+                       help="store the last obs-1 frames of each window, what the "
+                       "benchmark's models see (its normalize_boxes: True), and the "
+                       "dropped frame's box as targets/box_reference")
         q.add_argument("--threshold", type=float, default=0.3)
         q.add_argument("--no-derive", action="store_true")
         q.add_argument("--stats", action="store_true",
@@ -268,20 +289,31 @@ def _benchmark_parsers(imp) -> None:
 def _run_benchmark(a) -> str:
     common = dict(openpose=a.openpose, poses=a.poses, threshold=a.threshold,
                   derive=not a.no_derive, obs_length=a.obs_length, tte=tuple(a.tte),
-                  overlap=a.overlap, force=a.force)
+                  overlap=a.overlap, cut_gaps=a.cut_gaps, drop_first=a.drop_first_frame,
+                  force=a.force)
     if a.format == "jaad":
         r = import_jaad(a.input, a.out, subset=a.subset, split_dir=a.split_dir, seed=a.seed,
                         val_frac=a.val_frac, test_frac=a.test_frac, **common)
     else:
         r = import_pie(a.input, a.out, **common)
     s = r["settings"]
-    lines = [f"wrote {r['output']}: {r['rows']} rows, {r['tracks']} pedestrians; windows: "
-             + ", ".join(_split_counts(k, n, r["class_counts"][k])
-                         for k, n in r["clips"].items()),
-             f"split: {r['split_note']}; windows of {s['obs_length']} frames, time to event "
-             f"{s['time_to_event'][0]}-{s['time_to_event'][1]}, every {s['stride']} frames "
-             f"(overlap {s['overlap']}); {r['short_tracks']} pedestrians too short left out"]
-    lines += [f"  skipped {x}" for x in r["skipped"]]
+    lines = [f"wrote {r['output']}: {r['rows']} pose frames, {r['tracks']} pedestrians; "
+             "windows: " + ", ".join(_split_counts(k, n, r["class_counts"][k])
+                                     for k, n in r["clips"].items()),
+             f"split: {r['split_note']}; windows of {s['obs_length']} frames"
+             + (" (the first dropped: the models' 15)" if s["first_frame_dropped"] else "")
+             + f", every {s['stride']} frames (overlap {s['overlap']}); time to event "
+             f"{r['tte_range'][0]}-{r['tte_range'][1]} positions (meta/tte), "
+             f"{r['frames_to_event_range'][0]}-{r['frames_to_event_range'][1]} frame numbers "
+             f"(meta/frames_to_event); {r['short_tracks']} pedestrians too short left out",
+             f"windows across a gap in the frame numbers: {r['windows_across_gaps']}"
+             + (" (left out: --cut-gaps)" if a.cut_gaps else "")
+             + (f" ({', '.join(r['pedestrians_with_gaps'])})" if r["pedestrians_with_gaps"]
+                else "")]
+    if r["all_zero_poses"]:
+        lines.append(f"poses with every value 0: {r['all_zero_poses']} (read as poses "
+                     "without any joint: every joint missing)")
+    lines += [f"WARNING: {w}" for w in r["warnings"]]
     if a.stats:
         lines += benchmark_stats(r)
     return "\n".join(lines)

@@ -14,14 +14,14 @@ import json
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from .._native import core as _core
 from ..atomic import atomic_output
 from ..conversion.api import clip_settings
 from ..skeletons import CARLA, skeleton_map
 from .readers import BadInput, Detections, option, read_coco, read_labels, read_openpose
 
-__all__ = ["clip_settings", "write_clip_file", "import_coco", "import_openpose"]  # clip_settings: the converter's own
+__all__ = ["clip_settings", "write_clip_file", "map_joints", "import_coco", "import_openpose"]  # clip_settings: the converter's own
 
 _STR_META = ("video_id", "pedestrian_id", "age", "gender", "model", "map")
 
@@ -63,6 +63,22 @@ def _crossing(det: Detections, labels, order) -> np.ndarray:
     return out
 
 
+def map_joints(joints: str, points, scores, threshold: float, derive: bool) -> tuple:
+    """Detected joints of the set ``joints`` -> CARLA-26: ``(map, uv f32, visible,
+    confidence f32, at_origin)``; a joint is visible when its score is at least
+    ``threshold`` and above 0 and it is not at (0, 0) (``at_origin``: the loaders read
+    (0, 0) as missing, so those are counted for the report and left out)."""
+    m = skeleton_map(joints, CARLA, derive)
+    seen = (scores >= threshold) & (scores > 0)
+    uv, visible = m.apply(points, seen, fill=0.0)
+    conf, _ = m.apply(scores[..., None], seen, fill=0.0)
+    at_origin = visible & (uv[..., 0] == 0) & (uv[..., 1] == 0)
+    visible &= ~at_origin
+    uv = np.where(visible[..., None], uv, 0.0).astype(np.float32)
+    conf = np.where(visible, conf[..., 0], 0.0).astype(np.float32)
+    return m, uv, visible, conf, at_origin
+
+
 def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3,
                     derive: bool = True, skip_short: bool = False, force: bool = False,
                     **clip_options) -> dict:
@@ -98,15 +114,8 @@ def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3
             raise BadInput(f"{det.source}: every track is shorter than a clip of {L} frames; "
                            "nothing written")
     crossing = _crossing(det, labels, order)
-    m = skeleton_map(det.joints, CARLA, derive)
-    scores = det.scores[order]
-    seen = (scores >= threshold) & (scores > 0)
-    uv, visible = m.apply(det.points[order], seen, fill=0.0)
-    conf, _ = m.apply(scores[..., None], seen, fill=0.0)
-    at_origin = visible & (uv[..., 0] == 0) & (uv[..., 1] == 0)
-    visible &= ~at_origin  # the loaders read (0, 0) as missing: say so in the report
-    uv = np.where(visible[..., None], uv, 0.0).astype(np.float32)
-    conf = np.where(visible, conf[..., 0], 0.0).astype(np.float32)
+    m, uv, visible, conf, at_origin = map_joints(det.joints, det.points[order],
+                                                 det.scores[order], threshold, derive)
     rows = dict(video=vcode[order], track=tcode[order], frame=det.frame[order],
                 width=det.width[order], height=det.height[order], crossing=crossing,
                 uv=uv, visible=visible, confidence=conf)

@@ -11,15 +11,18 @@ set02, set04 train, set05, set06 val, set03 test.
 Samples as the PedestrianActionBenchmark's ``crossing`` sequences: every pedestrian's
 track ends at its ``crossing_point`` (PIE sets it 3 frames before the last where the
 pedestrian does not cross); label 1 when ``crossing`` is 1 (0 and -1, irrelevant: 0).
-Videos are named ``SET/VIDEO``. Windows: :mod:`.benchmark_annotations`.
+Videos are named ``SET/VIDEO``. Windows: :mod:`.benchmark_windows`. What pie_data.py
+refuses is refused here too, in one line: an occlusion, action, look, gesture or cross
+value it does not map, a crossing point that is not one of the pedestrian's frames.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-from .annotation_xml import crossing_attributes, parse_xml, track_boxes, video_size
+from .annotation_xml import (check_values, crossing_attributes, parse_xml, track_boxes,
+                             video_size)
 from .benchmark_annotations import (BENCHMARK, OpenPoseFrames, PickledPoses, Track,
-                                    import_tracks)
+                                    import_tracks, refuse_existing)
 from .readers import BadInput
 
 __all__ = ["SET_SPLIT", "read_pie", "import_pie"]
@@ -33,6 +36,15 @@ def _attributes(path: Path) -> dict:
     return crossing_attributes(path, "PIE attributes")
 
 
+#: the values pie_data.py maps (``_map_text_to_scalar``) on every box of a pedestrian
+#: inside the frame
+VALUES = {"occlusion": ("none", "part", "full"), "action": ("standing", "walking"),
+          "look": ("not-looking", "looking"),
+          "gesture": ("__undefined__", "hand_ack", "hand_yield", "hand_rightofway", "nod",
+                      "other"),
+          "cross": ("not-crossing", "crossing", "crossing-irrelevant")}
+
+
 def _tracks(path: Path, attr_path: Path, video: str, split: str) -> list:
     root = parse_xml(path, "PIE annotation")
     tracks, attrs = [], None
@@ -43,6 +55,7 @@ def _tracks(path: Path, attr_path: Path, video: str, split: str) -> list:
         if not boxes:
             continue
         boxes = [b for b in boxes if b[2] != 1]  # outside the frame
+        check_values(path, n, pid, boxes, VALUES, "PIE's pie_data.py")
         if attrs is None:
             attrs = _attributes(attr_path)
         if pid not in attrs:
@@ -50,11 +63,18 @@ def _tracks(path: Path, attr_path: Path, video: str, split: str) -> list:
                            "nothing written")
         frames, xyxy = [b[0] for b in boxes], [b[1] for b in boxes]
         crossing, point = attrs[pid]
-        end, skip = (frames.index(point), "") if point in frames else \
-            (None, f"crossing_point {point} is not one of its frames")
-        tracks.append(Track(video, pid, frames, xyxy, int(crossing > 0), end, split,
-                            str(path), True, skip))
+        if point not in frames:
+            raise BadInput(f"{attr_path}: pedestrian {pid!r}: crossing_point {point} is not "
+                           "one of its annotated frames inside the image ("
+                           f"{_span(frames)} in {path}); pie_data.py stops there too; "
+                           "nothing written")
+        tracks.append(Track(video, pid, frames, xyxy, int(crossing > 0), frames.index(point),
+                            split, str(path), True))
     return tracks
+
+
+def _span(frames: list) -> str:
+    return f"{frames[0]}..{frames[-1]}" if frames else "none"
 
 
 def read_pie(root) -> tuple:
@@ -94,18 +114,20 @@ def _key(set_id, video: str) -> str:
 def import_pie(root, out, *, openpose=None, poses=None, threshold: float = 0.3,
                derive: bool = True, obs_length: int = BENCHMARK["obs_length"],
                tte=BENCHMARK["tte"], overlap: float = BENCHMARK["overlap"]["pie"],
-               force: bool = False) -> dict:
+               cut_gaps: bool = False, drop_first: bool = False, force: bool = False) -> dict:
     """PIE annotations + 2D poses (``openpose``: OpenPose JSON below ``SET/`` folders or
     named ``SET_VIDEO_<frame>_keypoints.json``, matched to the annotated boxes; or
     ``poses``: the benchmark's ``pose_SET.pkl`` file(s), restricted unpickler) -> the clip
-    file ``out``; returns the report."""
+    file ``out``; returns the report. ``cut_gaps``, ``drop_first``:
+    :mod:`.benchmark_windows`."""
     if (openpose is None) == (poses is None):
         raise ValueError("give the poses: openpose=FOLDER or poses=PICKLE (one of them)")
+    refuse_existing(out, force)
     tracks, sizes, note = read_pie(root)
     source = OpenPoseFrames(openpose, _key) if openpose else PickledPoses(poses, _key, derive)
     r = import_tracks(tracks, out, dataset="pie", source=source, sizes=sizes, root=root,
                       obs_length=obs_length, tte=tte, overlap=overlap, threshold=threshold,
-                      derive=derive, force=force,
+                      derive=derive, cut_gaps=cut_gaps, drop_first=drop_first, force=force,
                       settings=dict(split=note, poses=str(openpose or poses)))
     r["split_note"] = note
     return r
