@@ -38,7 +38,7 @@ def _runs(table_dir: Path) -> dict:
 
 def run_plateau(run_dir: Path, tail: float) -> dict:
     """Best and last epoch, updates, and the best val loss's relative gain in the tail."""
-    from bsp_fast.training.curves import read_logs
+    from bsp_fast.training.logs import read_logs
 
     logs = read_logs(run_dir)
     val = {e: v for e, v in logs.get("val/loss", {}).items() if math.isfinite(v)}

@@ -2,7 +2,7 @@
 """PoseFormer beside the LSTM as training goes on: validation MPJPE against optimiser
 updates and against CPU seconds, from the runs of ``bsp-reproduce ablation_poseformer``
 (their CSV logs: ``val/mpjpe_mm``, ``cost/updates`` and ``cost/cpu_s`` per epoch, read with
-``bsp_fast.training.curves.read_logs``), and where PoseFormer's curve first passes the
+``bsp_fast.training.logs.read_logs``), and where PoseFormer's curve first passes the
 LSTM's, if it does.
 
     bsp-reproduce ablation_poseformer --data data/medium-poses --seeds 3 --jobs 2
@@ -35,7 +35,7 @@ METRIC = "mpjpe_mm"
 def run_series(run_dir, metric: str = METRIC) -> dict:
     """``{"updates", "cpu_s", "value"}`` arrays of one run, one entry per epoch with a
     validation value (epochs without ``cost/`` columns are left out)."""
-    from bsp_fast.training.curves import read_logs
+    from bsp_fast.training.logs import read_logs
 
     logs = read_logs(run_dir)
     val, upd, cpu = (logs.get(k, {}) for k in (f"val/{metric}", "cost/updates", "cost/cpu_s"))

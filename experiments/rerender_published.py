@@ -53,7 +53,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     from bsp_fast.atomic import write_text
     from bsp_fast.reproduction import readme as RM
-    from bsp_fast.reproduction.report import format_table
+    from bsp_fast.reporting.reproduced import format_table
 
     rows, total = [], 0
     for path in sorted(args.results.glob("*.json")):

@@ -17,8 +17,9 @@ from bsp_fast.data import ClipDataset
 from bsp_fast.data import functional as F
 from bsp_fast.data.testing import write_clip_file
 from bsp_fast import reproduction as R
-from bsp_fast.training.curves import read_logs
-from bsp_fast.reproduction.figures import check_figures, figure_series
+from bsp_fast.training.logs import read_logs
+from bsp_fast.reporting.figures import figure_series
+from bsp_fast.reproduction.table_files import check_figures
 from bsp_fast.training.scoring import TaskMetrics
 from bsp_fast.reproduction.table_files import check_budget_rule, load_table, row_data, table_names
 

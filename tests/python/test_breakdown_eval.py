@@ -13,7 +13,8 @@ import torch
 import bsp_fast
 from bsp_fast.data.testing import write_clip_file
 from bsp_fast.skeleton import HIPS, JOINT_NAMES
-from bsp_fast.training.breakdown_format import format_breakdown
+from bsp_fast.reporting.breakdown import format_breakdown
+from bsp_fast.training.tasks import metric_formats
 from bsp_fast.training.eval_breakdown import (DISTANCE_EDGES_M, FILE, HEIGHT_EDGES_PX,
                                               bin_index)
 from bsp_fast.training.evaluate import breakdown
@@ -218,4 +219,4 @@ def test_cli_refuses_bad_combinations(runs, capsys, argv):
 
 def test_format_refuses_an_unknown_format(docs):
     with pytest.raises(ValueError, match="format must be one of"):
-        format_breakdown(docs["lifting"], "xml")
+        format_breakdown(docs["lifting"], metric_formats(), "xml")

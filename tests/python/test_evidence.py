@@ -23,6 +23,7 @@ from bsp_fast.metrics import uncertainty as U
 from bsp_fast.skeleton import HIPS
 from bsp_fast.reproduction import evidence as E
 from bsp_fast import reproduction as R
+from bsp_fast.reporting.reproduced import format_table
 from bsp_fast.reproduction import runner as S
 from bsp_fast.training.scoring import TaskMetrics
 from bsp_fast.training.precision import resolve_precision
@@ -159,7 +160,7 @@ def test_findings_marks_on_known_cases(tmp_path):
     res = _fake_results(tmp_path, ae, {"clean": clean, "noisy": clean - 0.3 + wobble})
     assert "size differs from the report's 10.0 p.p. ± 5.0" in \
         E.evaluate_findings(ae, res)[1]["ours"]
-    table = R.format_table(ae, res, E.evaluate_findings(ae, res))
+    table = format_table(ae, res, E.evaluate_findings(ae, res))
     assert re.search(r"\| clean \| .* \| \d+\.\d ± 0\.0 \[\d+\.\d, \d+\.\d\] \|", table)
 
 
@@ -419,7 +420,9 @@ def test_cell_interval_is_that_of_the_mean_over_seeds(tmp_path):
 
 
 def test_table_breakdown_aggregates_bins_over_seeds_by_hand():
-    from bsp_fast.reproduction.table_breakdown import aggregate, format_aggregate
+    from bsp_fast.reporting.breakdown import format_aggregate
+    from bsp_fast.reproduction.table_breakdown import aggregate
+    from bsp_fast.training.tasks import metric_formats
 
     def doc(a, b):
         return {"tables": [{"title": "per joint", "by": "joint", "count": "joints",
@@ -433,7 +436,7 @@ def test_table_breakdown_aggregates_bins_over_seeds_by_hand():
                                      "seeds": 2, "count": 10.0}
     assert cells["lstm"]["head"]["mean"] == 30.0 and cells["lstm"]["head"]["seeds"] == 1
     assert cells["mean"]["hips"]["std"] == 0.0
-    md = format_aggregate(agg, {"lstm": "LSTM"}, 2, "## t")
+    md = format_aggregate(agg, {"lstm": "LSTM"}, 2, "## t", metric_formats())
     # mm in the task registry's format (two decimals), like every other table (#35)
     assert "| hips | 12.00 ± 2.83 (n 10) | 20.00 (n 10) |" in md
 

@@ -17,7 +17,7 @@ from bsp_fast import reproduction as R
 from bsp_fast.metrics import hierarchical as H
 from bsp_fast.metrics import uncertainty as U
 from bsp_fast.reproduction import evidence as E
-from bsp_fast.reproduction.report import status_text
+from bsp_fast.reporting.reproduced import format_table, status_text
 
 LIFT = ["poseformer", "lstm", "baseline_3d", "lstm_relative_rot"]
 
@@ -211,7 +211,7 @@ def test_holm_over_the_table_family_turns_marginal_findings_inconclusive(tmp_pat
     # by hand: sorted p2 < p0 = p1: 3 x p2, then 2 x p0, then max(2 x p0, p1)
     assert [f["p_holm"][0] for f in found] == pytest.approx([2 * p[0], 2 * p[0], 3 * p[2]])
     assert [f["status"] for f in found] == ["inconclusive", "inconclusive", "reproduced"]
-    text = R.format_table(tab, _write(tmp_path, tab, rows), found)
+    text = format_table(tab, _write(tmp_path, tab, rows), found)
     assert "Holm's family: this table file's 3 confirmatory comparisons at budget quick" in text
     # an exploratory finding (added after results were seen) is a family of its own
     # (m2 here: m1 and the clear one are then a family of two, 2 x p2 and max(2 x p2, p0))
@@ -259,7 +259,7 @@ def test_probability_of_improvement_in_a_finding_by_hand(tmp_path):
     f = E.evaluate_findings(tab, _write(tmp_path, tab, {"lstm": a, "poseformer": b}))[0]
     assert f["p_improvement"][0]["value"] == pytest.approx(0.5)
     res = _write(tmp_path, tab, {"lstm": a, "poseformer": b})
-    assert "P(a beats b)" in R.format_table(tab, res, E.evaluate_findings(tab, res))
+    assert "P(a beats b)" in format_table(tab, res, E.evaluate_findings(tab, res))
 
 
 def test_a_per_clip_metric_is_resampled_from_its_recordings_clips(tmp_path):
@@ -350,7 +350,7 @@ def test_two_cells_and_two_marks_recomputed_independently(tmp_path):
     tab = _lifting([_compare("lstm", "poseformer", ">", "first"),
                     _compare("baseline_3d", "lstm", ">", "second")])
     res = _write(tmp_path, tab, rows)
-    text = R.format_table(tab, res, E.evaluate_findings(tab, res))
+    text = format_table(tab, res, E.evaluate_findings(tab, res))
     # the raw sums as saved, read back without the code under test
     raw = {}
     for row in rows:
@@ -446,21 +446,20 @@ def test_a_row_whose_seeds_trained_in_different_precisions_is_named(tmp_path):
         v["precision"] = "bf16-mixed" if int(s) < 3 else "32"
     for v in res["results"]["poseformer"]["seeds"].values():
         v["precision"] = "bf16-mixed"
-    text = R.format_table(tab, res, E.evaluate_findings(tab, res))
+    text = format_table(tab, res, E.evaluate_findings(tab, res))
     line = [ln for ln in text.splitlines() if ln.startswith("Precision:")]
     assert len(line) == 1
     assert line[0].endswith("lstm (32: seeds 3, 4; bf16-mixed: seeds 0, 1, 2).")
     assert "poseformer" not in line[0]
     for v in res["results"]["lstm"]["seeds"].values():
         v["precision"] = "bf16-mixed"
-    assert "Precision:" not in R.format_table(tab, res, E.evaluate_findings(tab, res))
+    assert "Precision:" not in format_table(tab, res, E.evaluate_findings(tab, res))
 
 
 def test_labels_add_up():
     """#56, item 4: 'not recorded' only where a mixed run has no hash; a fails finding
     names the answer it compares with, which is not the table's trivial column."""
-    from bsp_fast.reproduction.protocol import protocol_lines
-    from bsp_fast.reproduction.table_files import table_header
+    from bsp_fast.reporting.reproduced import protocol_lines, table_header
 
     prot = {"table_file": "x.yaml", "hash": "a" * 64, "hashed": "h", "utc": "now",
             "code": {"commit": "b" * 40}, "mixed": {"r/seed-1": {"hash": "c" * 64,

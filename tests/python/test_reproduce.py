@@ -17,8 +17,8 @@ from bsp_fast.data.testing import write_clip_file
 from bsp_fast.training import config as C
 from bsp_fast import reproduction as R
 from bsp_fast.reproduction.findings import ONE_RUN
-from bsp_fast.reproduction.protocol import finding_label
-from bsp_fast.reproduction.report import status_text
+from bsp_fast.reporting.reproduced import finding_label, status_text
+from bsp_fast.reporting.values import format_value
 
 TABLES = R.TABLES
 
@@ -281,7 +281,7 @@ def test_smoke_run_prints_table_and_consistent_marks(table, data, tmp_path, caps
         cells = [c.strip() for c in row.strip("|").split("|")]
         m = next(iter(tab["metrics"]))
         col = header.index(tab["metrics"][m]["label"])
-        assert cells[col] == R.format_value(tab, m, saved["results"][name]["metrics"][m])
+        assert cells[col] == format_value(tab, m, saved["results"][name]["metrics"][m])
         if saved["results"][name]["epochs"] is not None:  # the cost of the row's own model
             from bsp_fast.models.cost import parameter_count
             from bsp_fast.training.module import load_module

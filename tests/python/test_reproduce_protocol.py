@@ -25,6 +25,7 @@ from bsp_fast import reproduction as R
 from bsp_fast.data.testing import write_clip_file
 from bsp_fast.reproduction import protocol as P
 from bsp_fast.reproduction import readme as RM
+from bsp_fast.reporting.results_page import findings_table
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -195,7 +196,7 @@ def test_exploratory_findings_are_labelled_never_bold_and_outside_the_family(fin
     assert P.confirmatory(pose) == [0, 1, 2] + list(range(4, 23))
     # the README's findings table: a decided confirmatory mark bold, an exploratory not
     marks = [dict(f, status="reproduced", rule=None) for f in found]
-    lines = RM.findings_table(marks).splitlines()[2:]
+    lines = findings_table(marks).splitlines()[2:]
     assert lines[0].endswith("| **reproduced** |")
     assert lines[1].endswith("| reproduced |") and "**" not in lines[1]
     assert "exploratory (added after results were seen" in lines[1]

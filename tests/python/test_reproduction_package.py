@@ -47,7 +47,7 @@ def test_no_shims_for_old_import_paths(old):
 
 def test_smoke_tables_carry_the_banner_and_others_do_not(tmp_path):
     from bsp_fast.reproduction import load_table
-    from bsp_fast.reproduction.report import SMOKE_BANNER, format_table
+    from bsp_fast.reporting.reproduced import SMOKE_BANNER, format_table
 
     tab = load_table("autoencoder")
     for budget, seeds in (("smoke", None), ("smoke", [1, 2]), ("quick", None)):

@@ -18,7 +18,7 @@ import yaml
 import bsp_fast
 from bsp_fast.data.testing import write_clip_file
 from bsp_fast.skeleton import JOINT_NAMES
-from bsp_fast.training.curves import read_logs
+from bsp_fast.training.logs import read_logs
 from bsp_fast.training.evaluate import main as eval_main
 from bsp_fast.training.train import main as train_main
 
@@ -99,7 +99,7 @@ def test_a_run_records_the_machine_that_made_it(runs):
     import os
     from pathlib import Path
 
-    from bsp_fast.reproduction.report import machines_note
+    from bsp_fast.reporting.reproduced import machines_note
 
     info = Path("/proc/cpuinfo").read_text().splitlines()
     name = next(ln.split(":", 1)[1].strip() for ln in info if ln.startswith("model name"))

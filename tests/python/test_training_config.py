@@ -7,7 +7,14 @@ import pytest
 
 from bsp_fast.training import config as C
 from bsp_fast.training.runs import RunDirectory, RunError, resolve_checkpoint
-from bsp_fast.training.tables import runs_table
+from bsp_fast.reporting.run_tables import runs_table as render_runs
+from bsp_fast.training.runs import read_finished
+from bsp_fast.training.tasks import TABLE_COLUMNS
+
+
+def runs_table(runs, fmt: str = "markdown", split: str = "test") -> str:
+    """What ``bsp-eval --table`` prints: the runs read, then rendered."""
+    return render_runs(read_finished(runs, split), TABLE_COLUMNS, fmt, split)
 
 
 def test_hp_values_use_yaml_syntax():

@@ -10,8 +10,9 @@ import torch
 
 from bsp_fast.training import tasks as T
 from bsp_fast.training.module import TASK_MODULES
-from bsp_fast.training.curves import curves_figure, plot_curves
-from bsp_fast.training.tables import COLUMNS
+from bsp_fast.reporting.curves import curves_figure, plot_curves
+from bsp_fast.training.logs import read_logs
+from bsp_fast.training.tasks import TABLE_COLUMNS as COLUMNS
 
 pytestmark = [pytest.mark.filterwarnings("ignore::DeprecationWarning"),
               pytest.mark.filterwarnings("ignore::UserWarning")]
@@ -103,7 +104,7 @@ def _lines(ax) -> dict:
 
 
 def test_curves_show_percent_best_epoch_and_whole_epochs():
-    fig = curves_figure(LOGS, "pose_estimation", initial={"pck_0.05": 0.3, "loss": 4.0})
+    fig = curves_figure(LOGS, T.get_task("pose_estimation").curve_metrics, initial={"pck_0.05": 0.3, "loss": 4.0})
     loss_ax, metric_ax = fig.axes
     got = _lines(metric_ax)
     # PCK in % as in the tables, not as a fraction
@@ -124,7 +125,7 @@ def test_curves_show_percent_best_epoch_and_whole_epochs():
         assert ticks and all(float(t).is_integer() for t in ticks), ticks
     # an explicit best epoch (the checkpoint's) wins; mm for lifting
     fig = curves_figure({"val/loss": {0: 1.0, 1: 2.0}, "val/mpjpe_mm": {0: 90.0, 1: 80.0}},
-                        "lifting", best_epoch=2)
+                        T.get_task("lifting").curve_metrics, best_epoch=2)
     assert fig.axes[1].get_ylabel() == "mm"
     np.testing.assert_allclose(_lines(fig.axes[1])["val MPJPE (mm)"].get_ydata(), [90, 80])
     assert [list(ln.get_xdata()) for ln in fig.axes[0].get_lines()
@@ -137,7 +138,8 @@ def test_plot_curves_writes_a_png_from_the_csv_logs(tmp_path):
     rows = ["epoch,step,train/loss,val/loss,val/f1"]
     rows += [f"{e},{e * 4 + 3},{3 - e},{2 - e / 2},{0.25 * e}" for e in range(3)]
     (logs / "metrics.csv").write_text("\n".join(rows) + "\n")
-    out = plot_curves(tmp_path, "classification")
+    out = plot_curves(read_logs(tmp_path), T.get_task("classification").curve_metrics,
+                      tmp_path / "curves.png")
     assert out == tmp_path / "curves.png" and out.read_bytes()[:4] == b"\x89PNG"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["curves.png", "logs"]
 

@@ -168,7 +168,9 @@ def test_no_event_no_table_and_the_note_says_why(converted, run, tmp_path):
 def test_table_breakdown_aggregates_the_time_to_event_bins_over_seeds():
     """bsp-reproduce --breakdown: the time-to-event table's F1, AUROC and AP, mean ± std
     over seeds; a seed's document saved before the table existed adds nothing to it."""
-    from bsp_fast.reproduction.table_breakdown import aggregate, format_aggregate
+    from bsp_fast.reporting.breakdown import format_aggregate
+    from bsp_fast.reproduction.table_breakdown import aggregate
+    from bsp_fast.training.tasks import metric_formats
 
     profile = {"title": "per age/gender profile", "by": "profile", "count": "clips",
                "columns": {"crossing": "crossing clips", "f1": "F1"},
@@ -191,7 +193,7 @@ def test_table_breakdown_aggregates_the_time_to_event_bins_over_seeds():
     assert auc["mean"] == pytest.approx(0.7) and auc["std"] == pytest.approx(0.02 ** 0.5)
     assert ap == {"mean": 0.75, "std": 0.0, "seeds": 2, "count": 4.0}
     assert agg[0]["rows"]["lstm"]["adult/female"]["seeds"] == 3
-    md = format_aggregate(agg, {"lstm": "LSTM"}, 3, "## t")
+    md = format_aggregate(agg, {"lstm": "LSTM"}, 3, "## t", metric_formats())
     assert "### per time to event (AUROC): AUROC (count: clips)" in md
     assert "| 30-39 | 0.700 ± 0.141 (n 4) |" in md
 

@@ -27,7 +27,8 @@ import numpy as np
 
 from ..metrics import hierarchical as H
 from ..metrics import uncertainty as U
-from .findings import better as _sign, format_value
+from ..reporting.values import format_value
+from .findings import better as _sign
 from .protocol import confirmatory
 
 __all__ = ["summarise", "evaluate_findings", "statistics", "rerun_difference",

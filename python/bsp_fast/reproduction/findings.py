@@ -7,10 +7,11 @@ on the report's own numbers fill the report column of both. See docs/reproduce.m
 from __future__ import annotations
 
 from ..metrics.uncertainty import MIN_SEEDS, UNSURE
-from ..training.tasks import format_metric, get_task
+from ..reporting.values import format_value
+from ..training.tasks import get_task
 from .table_files import rows_of
 
-__all__ = ["evaluate_findings", "format_value", "better", "YES", "NO", "NA", "HOLDS",
+__all__ = ["evaluate_findings", "better", "YES", "NO", "NA", "HOLDS",
            "FAILS", "ONE_RUN"]
 
 YES, NO, NA = "reproduced", "not reproduced", "n/a"
@@ -22,12 +23,6 @@ ONE_RUN = f"one run per row (a mark needs at least {MIN_SEEDS} seeds: --seeds {M
 def better(tab, metric) -> int:
     """+1 when higher is better, -1 when lower is, 0 when neither."""
     return {"higher": 1, "lower": -1}.get(tab["metrics"][metric].get("better"), 0)
-
-
-def format_value(tab, metric, value, diff: bool = False) -> str:
-    """A value of ``metric`` in ``tab``'s format (the task registry's): the one formatter,
-    :func:`~bsp_fast.training.tasks.format_metric`."""
-    return format_metric(tab["metrics"].get(metric, {}).get("format", ".3f"), value, diff)
 
 
 def _rel(a, b, relation, margin=0.0) -> bool:

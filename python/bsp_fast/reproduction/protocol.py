@@ -34,11 +34,11 @@ import subprocess
 from pathlib import Path
 
 from ..atomic import write_text
+from ..reporting.reproduced import protocols_text
 
 __all__ = ["HASHED", "LEDGER", "DEVIATION_KEYS", "ProtocolChanged", "table_hash",
            "code_version", "utc_now", "check_deviations", "check_exploratory",
-           "confirmatory", "mark_exploratory", "finding_label", "guard", "record_runs",
-           "protocol_lines", "code_text"]
+           "confirmatory", "mark_exploratory", "guard", "record_runs"]
 
 #: what :func:`table_hash` hashes, in words (recorded beside the hash)
 HASHED = ("sha256 of the table file's parsed YAML without its deviations list (and power "
@@ -100,13 +100,6 @@ def code_version() -> dict:
             status = _git(pkg, "status", "--porcelain", "--untracked-files=no") or ""
             return {"commit": head, "dirty": bool(status.strip())}
     return {"version": bsp_fast.__version__}
-
-
-def code_text(code: dict) -> str:
-    if "commit" in code:
-        return f"commit {code['commit'][:10]}" + (" with uncommitted changes"
-                                                  if code.get("dirty") else "")
-    return f"bsp_fast {code.get('version', '?')} (not a git checkout)"
 
 
 def utc_now() -> str:
@@ -177,12 +170,6 @@ def mark_exploratory(tab: dict, found: list) -> list:
     return found
 
 
-def finding_label(f: dict) -> str:
-    """A finding's text as printed: exploratory ones labelled (never bold)."""
-    return ("exploratory (added after results were seen; not in the confirmatory family): "
-            + f["text"]) if f.get("exploratory") else f["text"]
-
-
 # ---------------------------------------------------------------------- the ledger
 def _read_ledger(base: Path, tab: dict, budget: str) -> dict:
     p = base / LEDGER
@@ -204,13 +191,6 @@ def _options(overrides) -> dict:
     """The given options that change what a run computes, as JSON values."""
     given = {k: v for k, v in (overrides or {}).items() if k not in EXECUTION_KEYS}
     return json.loads(json.dumps(given, sort_keys=True, default=str))
-
-
-def _earlier(mixed: dict) -> str:
-    hashes = sorted({(m["hash"] or "none")[:12] for m in mixed.values()})
-    return "protocol hash " + ", ".join(hashes) + "".join(
-        sorted({f"; options {json.dumps(m['options'], sort_keys=True)}"
-                for m in mixed.values() if m["options"]}))
 
 
 def guard(base, tab: dict, budget: str, runs, overrides=None, *,
@@ -238,7 +218,7 @@ def guard(base, tab: dict, budget: str, runs, overrides=None, *,
         shown = ", ".join(list(mixed)[:6]) + (", ..." if len(mixed) > 6 else "")
         raise ProtocolChanged(
             f"{base}: {len(mixed)} finished or interrupted run(s) were made under another "
-            f"version of the table file {tab['path']} or other options ({_earlier(mixed)}; "
+            f"version of the table file {tab['path']} or other options ({protocols_text(mixed)}; "
             f"now {now['hash'][:12]}"
             + (f", options {json.dumps(now['options'], sort_keys=True)}" if now["options"]
                else "") + "; 'none': made before runs were recorded): "
@@ -260,39 +240,3 @@ def record_runs(base, protocol: dict, ledger: dict, names) -> None:
         ledger["runs"][name] = {k: protocol[k] for k in ("hash", "options", "code", "utc")}
     Path(base).mkdir(parents=True, exist_ok=True)
     write_text(Path(base) / LEDGER, json.dumps(ledger, indent=1))
-
-
-def protocol_lines(tab: dict, res: dict) -> list:
-    """Markdown lines printed under a table: the protocol its results were made under,
-    runs mixed in from another protocol (``--allow-changed``), the table's deviations."""
-    p, out = res.get("protocol"), []
-    if p:
-        out += ["", f"Registered protocol: `{Path(p['table_file']).name}` sha256 "
-                f"{p['hash'][:12]} ({p['hashed']}), {code_text(p['code'])}, results written "
-                f"{p['utc']}."]
-        if p.get("options"):
-            out.append("Options given over the table file's (`--set`, option flags): "
-                       f"`{json.dumps(p['options'], sort_keys=True)}`.")
-        if p.get("mixed"):
-            earlier = _earlier(p["mixed"])
-            none = " ('none': not recorded)" if any(not m.get("hash") for m in
-                                                    p["mixed"].values()) else ""
-            out.append(f"**Mixed protocols (--allow-changed):** {len(p['mixed'])} run(s) "
-                       f"were made under {earlier}{none}: {', '.join(p['mixed'])}.")
-        if p.get("restored"):
-            froms = sorted({(p.get("runs", {}).get(n) or {}).get("restored_from", "?")
-                            for n in p["restored"]})
-            out.append(f"**Read from published results (--with-published):** "
-                       f"{len(p['restored'])} run(s) trained on another machine, their "
-                       f"numbers as published in {', '.join(froms)}; each keeps the protocol "
-                       "and code it was trained under (its record in results.json).")
-    devs = tab.get("deviations") or []
-    if devs:
-        out += ["", "Deviations from the registered protocol:"]
-        for d in devs:
-            seen = ("after test numbers were seen" + (f" (in {d['seen_in']})"
-                                                     if d.get("seen_in") else "")
-                    if d["seen_test_numbers"] else "before any test number was seen")
-            out.append(f"- {d['when']}, commit {d['commit']}, {seen}: {d['what']} "
-                       f"Why: {d['why']}")
-    return out

@@ -24,7 +24,7 @@ from ..defaults import SEED
 from ..training import config as C
 from ..training.runs import PER_RECORDING_FILE as BREAKDOWN
 from ..training.runs import RunError, read_run, resumable
-from .cost_columns import run_cost
+from .cost import run_cost
 from .noisy_boxes import noisy_box_metrics
 from .protocol import guard, record_runs
 from .restore import RESTORED_KEY, restorable

@@ -13,19 +13,16 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from pathlib import Path
 
 import numpy as np
 
-from ..training.tasks import format_metric, metric_spec
+from ..reporting.breakdown import COUNTS, draw_breakdowns, format_aggregate, plain
+from ..training.tasks import metric_formats
 
-__all__ = ["run_dirs", "run_breakdowns", "aggregate", "format_aggregate", "draw_breakdowns",
-           "table_breakdown", "MD", "JSON"]
+__all__ = ["run_dirs", "run_breakdowns", "aggregate", "table_breakdown", "MD", "JSON"]
 
 MD, JSON = "breakdown.md", "breakdown.json"
-# count-like columns of a breakdown table: never the value a bin is judged by
-_COUNTS = ("count", "joints", "crossing")
 
 
 def run_dirs(res: dict) -> list:
@@ -62,7 +59,7 @@ def run_breakdowns(res: dict, force: bool = False, log=print) -> dict:
 
 
 def _main_key(columns: dict) -> str:
-    return next(k for k in columns if k not in _COUNTS)
+    return next(k for k in columns if k not in COUNTS)
 
 
 def _stat(values: list) -> tuple:
@@ -126,85 +123,9 @@ def _aggregate_one(docs: dict, t0: dict, key: str) -> dict:
             "metric": key, "label": t0["columns"][key], "bins": bins, "rows": per_row}
 
 
-def _value(metric: str, x: float) -> str:
-    spec = metric_spec(metric)
-    return format_metric(spec.fmt if spec is not None else ".3f", x)
-
-
-def format_aggregate(agg: list, labels: dict, n_seeds: int, heading: str) -> str:
-    """Markdown: one table per breakdown table, bins down, rows across; a cell is
-    ``mean ± std (n COUNT)`` over the seeds with a value in that bin."""
-    lines = [heading, "",
-             f"Each cell: mean ± std over {n_seeds} seed(s) of the row, and the bin's "
-             "count (mean over seeds) in brackets; — where no seed has a value in the "
-             "bin.", ""]
-    for t in agg:
-        rows = list(t["rows"])
-        head = [t["by"]] + [labels.get(r, r) for r in rows]
-        lines += [f"### {t['title']}: {t['label']} (count: {t['count']})", "",
-                  "| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-        for b in t["bins"]:
-            cells = [str(b)]
-            for r in rows:
-                c = t["rows"][r].get(b)
-                if c is None or not c["seeds"]:
-                    cells.append("—" if c is None else f"— (n {c['count']:.0f})")
-                else:
-                    sd = f" ± {_value(t['metric'], c['std'])}" if c["seeds"] > 1 else ""
-                    cells.append(f"{_value(t['metric'], c['mean'])}{sd} (n {c['count']:.0f})")
-            lines.append("| " + " | ".join(cells) + " |")
-        lines.append("")
-    return "\n".join(lines).rstrip("\n") + "\n"
-
-
-def _slug(title: str) -> str:
-    return re.sub(r"[^a-z0-9]+", "-", title.lower()).strip("-")
-
-
-def draw_breakdowns(agg: list, labels: dict, out_dir, title: str, budget: str) -> list:
-    """One grouped bar figure per breakdown table (bars: rows; error bars: ± std over
-    seeds), ``OUT/breakdown-<table>.png``; returns the paths."""
-    from .._extras import require
-
-    require("matplotlib", "bsp-reproduce --breakdown's figures").use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    from ..training.curves import save_figure
-
-    written = []
-    for t in agg:
-        rows = list(t["rows"])
-        bins = t["bins"]
-        scale = 100.0 if t["metric"].startswith("pck") else 1.0
-        width = 0.8 / max(len(rows), 1)
-        wide = len(bins) > 8
-        f, ax = plt.subplots(figsize=(11 if wide else 7, 4.5))
-        x = np.arange(len(bins))
-        for i, r in enumerate(rows):
-            cells = [t["rows"][r].get(b) for b in bins]
-            mean = [scale * c["mean"] if c and c["seeds"] else np.nan for c in cells]
-            std = [scale * c["std"] if c and c["seeds"] else np.nan for c in cells]
-            ax.bar(x + (i - (len(rows) - 1) / 2) * width, mean, width, yerr=std,
-                   capsize=2, label=labels.get(r, r), error_kw={"lw": 0.8})
-        ax.set_xticks(x)
-        ax.set_xticklabels(bins, rotation=60 if wide else 0, ha="right" if wide else "center",
-                           fontsize=7 if wide else 8)
-        ax.set_ylabel(t["label"])
-        ax.set_xlabel(t["by"])
-        ax.grid(axis="y", alpha=0.3)
-        ax.legend(fontsize=7, title="mean ± std over seeds", title_fontsize=7)
-        ax.set_title(f"{title}: {t['title']}", fontsize=10)
-        f.text(0.99, 0.01, f"budget {budget}", ha="right", va="bottom", fontsize=7,
-               color="grey")
-        f.tight_layout()
-        written.append(save_figure(f, Path(out_dir) / f"breakdown-{_slug(t['title'])}.png"))
-    return written
-
-
 def table_breakdown(tab: dict, res: dict, force: bool = False, log=print) -> list:
     """Everything ``--breakdown`` adds to a table's folder; returns the paths written."""
     from ..atomic import write_text
-    from ..training.breakdown_format import plain
 
     docs = run_breakdowns(res, force, log)
     if not docs:
@@ -216,7 +137,7 @@ def table_breakdown(tab: dict, res: dict, force: bool = False, log=print) -> lis
     n_seeds = len(res.get("seeds") or [1])
     base = Path(res["dir"])
     heading = f"## {tab['title']}: test breakdown, budget {res['budget']}"
-    write_text(base / MD, format_aggregate(agg, labels, n_seeds, heading))
+    write_text(base / MD, format_aggregate(agg, labels, n_seeds, heading, metric_formats()))
     write_text(base / JSON, json.dumps(plain({"table": tab["table"], "budget": res["budget"],
                                               "seeds": res.get("seeds"), "tables": agg}),
                                        indent=1) + "\n")

@@ -7,8 +7,9 @@ A table file holds ``common`` options, ``budgets`` (smoke / quick / full option 
 ``findings`` and ``budget_rule`` (the training rule every row follows, in words); the
 ablation tables also use ``own_updates`` (a row's own update cap, with its reason),
 ``data_suffix`` (a row reads a sibling dataset: ``--data`` plus the suffix; the table's
-``data_variants`` says how to make each) and ``figures`` (:mod:`.figures`). The registered
-protocol's fields, ``deviations`` and a finding's ``exploratory``, are :mod:`.protocol`'s.
+``data_variants`` says how to make each) and ``figures`` (:func:`check_figures`; drawn
+by :mod:`bsp_fast.reporting.figures`). The registered protocol's fields, ``deviations``
+and a finding's ``exploratory``, are :mod:`.protocol`'s.
 """
 from __future__ import annotations
 
@@ -18,14 +19,14 @@ from pathlib import Path
 from .. import defaults
 from ..command_line import unknown
 from ..training import config as C
-from .figures import check_figures
 from .protocol import check_deviations, check_exploratory
 from ..training.tasks import get_task
 
-__all__ = ["wanted_rows", "table_header", "settings_cells", "TABLES", "BUDGETS", "KINDS",
+__all__ = ["wanted_rows", "TABLES", "BUDGETS", "KINDS",
            "RELATIONS", "RULE_KEYS", "experiments_dirs", "experiments_dir", "load_table",
            "row_options", "check_budget_rule", "rows_of", "ROW_CROP_BOXES", "row_crop_box",
-           "prepare_row_data", "UPDATE_KEYS", "row_data", "table_names"]
+           "prepare_row_data", "UPDATE_KEYS", "row_data", "table_names", "check_figures",
+           "FIGURE_KEYS", "X_SETTINGS"]
 
 TABLES = ("lifting", "classification", "autoencoder", "pose_estimation")
 BUDGETS = ("smoke", "quick", "full")
@@ -39,6 +40,56 @@ UPDATE_KEYS = ("epochs", "max_steps", "early_stop")
 #: boxes (the default, every row's protocol) or the union with the ground-truth joint box,
 #: only as an upper bound in a row of its own.
 ROW_CROP_BOXES = ("mask", "mask+joints")
+
+
+FIGURE_KEYS = ("file", "metric", "x", "title", "lines")
+#: row settings a figure may put on its x axis (as the runs recorded them)
+X_SETTINGS = ("mjp", "noise")
+
+
+def check_figures(tab: dict) -> None:
+    """ValueError naming the table file and the figure for a bad ``figures`` entry::
+
+        figures:
+          - file: f1_vs_mjp.png
+            metric: f1
+            x: mjp
+            title: "F1 against MJP"
+            lines:
+              - {label: "LSTM, σ 0", rows: [lstm-s0-m0, lstm-s0-m0.3]}
+    """
+    where = tab.get("path", tab.get("table"))
+    figs = tab.get("figures", [])
+    if not isinstance(figs, list):
+        raise ValueError(f"{where}: figures must be a list, got {type(figs).__name__}")
+    names = {r["name"] for r in tab["rows"]}
+    files = set()
+    for i, fig in enumerate(figs):
+        what = f"{where}: figure {i + 1}"
+        if not isinstance(fig, dict) or set(fig) - set(FIGURE_KEYS):
+            raise ValueError(f"{what}: a mapping with keys from {list(FIGURE_KEYS)}, got {fig!r}")
+        file = fig.get("file")
+        if not isinstance(file, str) or not re.fullmatch(r"[-_.A-Za-z0-9]+\.png", file):
+            raise ValueError(f"{what}: file {file!r} must be a plain name ending in .png")
+        if file in files or file == "curves.png":
+            raise ValueError(f"{what}: file {file!r} is already written for this table")
+        files.add(file)
+        if fig.get("metric") not in tab["metrics"]:
+            raise ValueError(f"{what}: metric {fig.get('metric')!r} is not one of "
+                             f"{list(tab['metrics'])}")
+        if fig.get("x") not in X_SETTINGS:
+            raise ValueError(f"{what}: x {fig.get('x')!r}; allowed: {list(X_SETTINGS)}")
+        lines = fig.get("lines")
+        if not isinstance(lines, list) or not lines:
+            raise ValueError(f"{what}: lines must be a non-empty list of {{label, rows}}")
+        for line in lines:
+            if not isinstance(line, dict) or not isinstance(line.get("label"), str) \
+                    or not isinstance(line.get("rows"), list) or not line["rows"]:
+                raise ValueError(f"{what}: a line is {{label: TEXT, rows: [ROW, ...]}}, "
+                                 f"got {line!r}")
+            bad = [r for r in line["rows"] if r not in names]
+            if bad:
+                raise ValueError(f"{what}: line {line['label']!r} names unknown row(s) {bad}")
 
 
 def check_budget_rule(tab: dict) -> None:
@@ -115,6 +166,9 @@ def load_table(table) -> dict:
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
     doc["metrics"] = metric_specs(task, doc["metrics"], path)
+    # what the renderers (bsp_fast.reporting) need of the task: its setting columns
+    # (sigma and MJP, where inputs can be deformed) and its trivial baseline's name
+    doc["deformed_inputs"], doc["trivial"] = task.deformed_inputs, task.baseline
     names = [r["name"] for r in doc["rows"]]
     for r in doc["rows"]:
         extra = r.get("budgets") or {}
@@ -169,7 +223,7 @@ def load_table(table) -> dict:
 def _registry(task) -> dict:
     """``{key: Metric}`` a table of ``task`` may name: the task's metrics, its extra ones,
     the normaliser fallback share and each metric scored on noisy boxes (``KEY_noisy``)."""
-    from ..training.tasks.base import NORMALISER_FALLBACK
+    from ..metrics.spec import NORMALISER_FALLBACK
 
     known = {m.key: m for m in (*task.metrics, *task.extra_metrics, NORMALISER_FALLBACK)}
     for m in list(known.values()):
@@ -308,25 +362,3 @@ def wanted_rows(tab: dict, rows=None) -> list:
         if src and src not in wanted:
             wanted.append(src)
     return wanted
-
-
-def table_header(tab: dict, epochs_label: str) -> tuple:
-    """``(header, metrics, reported, settings)`` of a results table: row, model, the
-    deformation settings (2D-input tasks), our metrics, the report's, the trivial
-    baseline's first metric (named: classification's is the majority class, never
-    crossing) and ``epochs_label``."""
-    metrics = list(tab["metrics"])
-    reported = [m for m in metrics if any(m in (r.get("report") or {}) for r in tab["rows"])]
-    settings = get_task(tab["task"]).deformed_inputs
-    header = ["row", "model"] + (["σ (px)", "MJP"] if settings else [])
-    header += [tab["metrics"][m]["label"] for m in metrics]
-    header += [f"report {tab['metrics'][m]['label']}" for m in reported]
-    header += [f"trivial {tab['metrics'][metrics[0]]['label']} "
-               f"({get_task(tab['task']).baseline})", epochs_label]
-    return header, metrics, reported, settings
-
-
-def settings_cells(r: dict) -> list:
-    """The σ and MJP cells of a row's result (``per joint`` for a per-joint MJP)."""
-    mjp = r.get("mjp")
-    return [f"{r.get('noise') or 0:g}", "per joint" if isinstance(mjp, list) else f"{mjp or 0:g}"]

@@ -7,11 +7,10 @@ command lines). Nothing here imports torch or Lightning until it is used.
 """
 from __future__ import annotations
 
-__all__ = ["TrainResult", "EvalResult", "PredictResult", "runs_table", "TASK_MODULES",
-           "load_module"]
+__all__ = ["TrainResult", "EvalResult", "PredictResult", "TASK_MODULES", "load_module"]
 
 _LAZY = {"TrainResult": "train", "EvalResult": "evaluate", "PredictResult": "predict",
-         "runs_table": "tables", "TASK_MODULES": "module", "load_module": "module"}
+         "TASK_MODULES": "module", "load_module": "module"}
 
 
 def __getattr__(name):

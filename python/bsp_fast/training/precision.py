@@ -29,8 +29,7 @@ from pathlib import Path
 
 __all__ = ["resolve_precision", "decide_precision", "native_bf16", "check_precision",
            "probe_cache_path", "probe_key", "probe_clock", "time_steps", "MARGIN", "cpu_flags",
-           "cpu_summary", "cpu_kernels", "kept_precision", "run_model_key", "machine_record",
-           "machine_text"]
+           "cpu_summary", "cpu_kernels", "kept_precision", "run_model_key", "machine_record"]
 
 #: the CPU flags that decide bf16's speed on a CPU, as benchmarks report them
 SPEED_FLAGS = ("avx2", "avx512f", "avx512_bf16", "amx_bf16", "amx_tile")
@@ -116,16 +115,6 @@ def machine_record(accelerator: str = "cpu") -> dict:
 
         gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else None
     return {"cpu": _cpu_name(), "cpu_flags": cpu_flags(), "cpus": os.cpu_count(), "gpu": gpu}
-
-
-def machine_text(rec) -> str:
-    """``"AMD EPYC (avx2), 2 CPUs"`` (``+ GPU name``) for a :func:`machine_record`;
-    ``"not recorded"`` for None (runs made before runs recorded it, 2026-11-27)."""
-    if not rec:
-        return "not recorded"
-    flags = " ".join(rec.get("cpu_flags") or []) or "no " + "/".join(SPEED_FLAGS[:2])
-    gpu = f" + {rec['gpu']}" if rec.get("gpu") else ""
-    return f"{rec.get('cpu')} ({flags}), {rec.get('cpus')} CPUs{gpu}"
 
 
 def cpu_kernels() -> str:

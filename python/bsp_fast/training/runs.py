@@ -20,6 +20,7 @@ from pathlib import Path
 from ..atomic import DATASET_FILES, check_outputs, publish, remove, temp_path, write_text
 
 __all__ = ["RunDirectory", "RunError", "default_run_dir", "resolve_checkpoint", "read_run",
+           "read_finished",
            "ENV_TMP", "MARKER", "write_marker", "read_marker", "orphaned_runs",
            "resume_hint", "resumable", "continues", "is_temporary", "refuse_unsafe_output",
            "check_run_outputs", "run_inputs", "open_run"]
@@ -365,6 +366,23 @@ def read_run(run_dir) -> dict:
     metrics = (json.loads(metrics_path.read_text(encoding="utf-8"))
                if metrics_path.is_file() else None)
     return {"config": cfg, "metrics": metrics}
+
+
+def read_finished(runs, split: str = "test") -> list:
+    """``[(run directory, config, metrics)]`` of finished runs that scored ``split``: what
+    ``bsp-eval --table`` and bsp-train's closing table render
+    (:func:`bsp_fast.reporting.run_tables.runs_table`). RunError naming the run that has
+    no metrics, or none of ``split``, and how to add them."""
+    loaded = []
+    for path in runs:
+        run = read_run(path)
+        if not run["metrics"]:
+            raise RunError(f"{path}: no metrics.json (an unfinished or failed run?)")
+        if run["metrics"].get(split) is None:
+            raise RunError(f"{path}: metrics.json has no {split!r} metrics "
+                           f"(bsp-eval {path} --split {split} --save adds them)")
+        loaded.append((Path(path), run["config"], run["metrics"]))
+    return loaded
 
 
 def write_json(obj, path) -> None:

@@ -11,19 +11,24 @@ modules in your own Lightning script").
 """
 from __future__ import annotations
 
+from ...metrics.spec import NORMALISER_FALLBACK
 from .autoencoder import Autoencoder
-from .base import NORMALISER_FALLBACK, Metric, Task, format_metric
+from .base import Task
 from .classification import Classification
 from .lifting import Lifting
 from .pose_estimation import PoseEstimation
 
-__all__ = ["Task", "Metric", "TASKS", "get_task", "BASELINES", "metric_spec", "format_metric"]
+__all__ = ["Task", "TASKS", "get_task", "BASELINES", "TABLE_COLUMNS", "metric_formats"]
 
 #: ``{name: task object}`` in the report's order.
 TASKS = {t.name: t for t in (Classification(), Autoencoder(), Lifting(), PoseEstimation())}
 
 #: What the trivial baseline of each task predicts (the "initial metrics" row).
 BASELINES = {name: t.baseline for name, t in TASKS.items()}
+
+#: ``{task: ((header, where, key, format), ...)}`` of ``bsp-eval --table``: where "m" a
+#: metric, "c" a config value (each task object's ``table_columns()``)
+TABLE_COLUMNS = {name: task.table_columns() for name, task in TASKS.items()}
 
 
 def get_task(name: str) -> Task:
@@ -34,14 +39,17 @@ def get_task(name: str) -> Task:
         raise ValueError(f"task must be one of {list(TASKS)}, got {name!r}") from None
 
 
-def metric_spec(key: str):
-    """The :class:`Metric` any task declares under ``key`` (its metrics, extra metrics and
-    the normaliser fallback share); None for a key no task declares (a count)."""
+def metric_formats() -> dict:
+    """``{key: table format}`` of every metric any task declares (its metrics, extra
+    metrics and the normaliser fallback share): what the renderers
+    (``bsp_fast.reporting``) format a breakdown's columns with; a key no task declares (a
+    count) is not in it."""
+    out: dict = {}
     for task in TASKS.values():
         for m in (*task.metrics, *task.extra_metrics):
-            if m.key == key:
-                return m
-    return NORMALISER_FALLBACK if key == NORMALISER_FALLBACK.key else None
+            out.setdefault(m.key, m.fmt)
+    out.setdefault(NORMALISER_FALLBACK.key, NORMALISER_FALLBACK.fmt)
+    return out
 
 
 def __dir__():

@@ -2,7 +2,8 @@
 and the realised missing-joint ratio of the inputs (MJR)."""
 from __future__ import annotations
 
-from .base import Metric, Task
+from ...metrics.spec import Metric
+from .base import Task
 
 __all__ = ["Autoencoder"]
 

@@ -13,62 +13,9 @@ without them; the scoring and prediction methods import torch when called.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from ...metrics.spec import NORMALISER_FALLBACK, Metric
 
-__all__ = ["Metric", "Task", "UNIT_SUFFIX", "NORMALISER_FALLBACK", "format_metric"]
-
-#: Table/curve label suffix of a metric's display unit.
-UNIT_SUFFIX = {"mm": " (mm)", "mm/frame": " (mm/frame)", "%": " (%)", "": ""}
-
-
-def format_metric(fmt: str, value, diff: bool = False, missing: str = "–") -> str:
-    """The one value formatter of every table (runs, reproduced tables, breakdowns): a
-    metric's ``fmt`` (a format spec, or ``pct``: a fraction shown in % with one decimal),
-    ``diff`` with a sign; ``missing`` for no value or NaN."""
-    if value is None or (isinstance(value, float) and value != value):
-        return missing
-    if fmt == "pct":
-        return f"{100 * value:+.1f}" if diff else f"{100 * value:.1f}"
-    return format(value, ("+" if diff else "") + fmt)
-
-
-@dataclass(frozen=True)
-class Metric:
-    """One scored value: ``key`` in metrics.json, ``label``, ``unit`` (``mm``, ``mm per
-    frame`` or ``fraction``), ``better`` (``higher``, ``lower`` or ``none``) and ``fmt``, its table
-    format (a format spec, or ``pct``: a fraction shown in %)."""
-    key: str
-    label: str
-    unit: str
-    better: str
-    fmt: str
-
-    @property
-    def percent(self) -> bool:
-        return self.fmt == "pct"
-
-    @property
-    def display_unit(self) -> str:
-        """``%`` for fractions shown in %, ``mm``, ``mm/frame``, or ``""``."""
-        if self.percent:
-            return "%"
-        return {"mm": "mm", "mm per frame": "mm/frame"}.get(self.unit, "")
-
-    @property
-    def header(self) -> str:
-        """Label with its display unit, e.g. ``PCK@0.05 (%)``, ``MPJPE (mm)``."""
-        return self.label + UNIT_SUFFIX[self.display_unit]
-
-    def display(self, value: float) -> float:
-        """``value`` in the display unit (fractions shown in % times 100)."""
-        return 100.0 * value if self.percent else value
-
-
-#: Share of input frames whose hips-neck normaliser fell back to the joint bbox (hips or
-#: neck missing, or coinciding): scored by every 2D-input task (``normaliser_fallback`` in
-#: the batch), logged as ``train/``, ``val/`` and ``test/normaliser_fallback``.
-NORMALISER_FALLBACK = Metric("normaliser_fallback", "normaliser fallback", "fraction", "none",
-                             "pct")
+__all__ = ["Task"]
 
 
 class Task:
@@ -127,6 +74,12 @@ class Task:
                 return m
         raise ValueError(f"task {self.name!r} has no metric {key!r}; allowed: "
                          + ", ".join(m.key for m in self.declared))
+
+    @property
+    def curve_metrics(self) -> tuple:
+        """The :class:`~bsp_fast.metrics.spec.Metric` of each key of ``curves``: what
+        ``curves.png`` draws (:func:`bsp_fast.reporting.curves.plot_curves`)."""
+        return tuple(self.metric(k) for k in self.curves)
 
     @property
     def units(self) -> dict:

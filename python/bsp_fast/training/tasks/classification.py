@@ -4,7 +4,8 @@ benchmark's threshold-free AUROC and average precision (``ap``) of the model's
 P(crossing), computed exactly over the split (:mod:`bsp_fast.metrics.ranking`)."""
 from __future__ import annotations
 
-from .base import Metric, Task
+from ...metrics.spec import Metric
+from .base import Task
 
 __all__ = ["Classification", "constant_f1"]
 

@@ -5,7 +5,8 @@ edges), so every row is scored on the same frames; the ``*_centre`` metrics scor
 ``[CENTRE_MARGIN, L - CENTRE_MARGIN)`` again, the frames the report scored PoseFormer on."""
 from __future__ import annotations
 
-from .base import Metric, Task
+from ...metrics.spec import Metric
+from .base import Task
 
 __all__ = ["Lifting", "hips_neck_lengths", "CENTRE_MARGIN"]
 

@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import functools
 
+from ...metrics.spec import Metric
 from ...skeleton import JOINT_NAMES
-from .base import Metric, Task
+from .base import Task
 
 __all__ = ["PoseEstimation", "HANDS", "FEET"]
 
