@@ -38,17 +38,12 @@ LONG_FUNCTIONS = {
     "interop/exporters.py:export_coco": "one COCO document built top to bottom",
     "interop/exporters.py:export_videopose3d": "one VideoPose3D archive built top to bottom",
     "interop/readers.py:read_coco": "the COCO format's cases, one after another",
-    "interop/benchmark_annotations.py:import_tracks": "one import, checks then writes",
     "reproduction/table_files.py:load_table": "one table file's checks, key by key",
     "training/eval_breakdown.py:_frame_tables": "one table per breakdown, side by side",
     "training/setup.py:make_trainer": "the Trainer's arguments, one group after another",
     "preview/frames.py:preview_frames": "one figure drawn top to bottom",
     "synth/generate.py:generate": "one dataset: plan, clips, config, top to bottom",
     "conversion/sharded.py:convert_sharded": "plan, submit, gather, one after another",
-    # the two orchestrators: plan -> run -> collect is the open work of the house's
-    # fourth pass (docs/architecture.md)
-    "training/train.py:_run": "to be split into plan, run and collect",
-    "reproduction/runner.py:run_table": "to be split into plan, run and collect",
 }
 ROOT = Path(__file__).resolve().parent.parent
 PKG = ROOT / "python" / "bsp_fast"
