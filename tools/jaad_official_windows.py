@@ -43,7 +43,8 @@ def _stub(name: str, **attrs) -> None:
     if top not in sys.modules and importlib.util.find_spec(top) is None:
         parts = name.split(".")
         for i in range(len(parts)):
-            sys.modules.setdefault(".".join(parts[:i + 1]), types.ModuleType(".".join(parts[:i + 1])))
+            part = ".".join(parts[:i + 1])
+            sys.modules.setdefault(part, types.ModuleType(part))
         for k, v in attrs.items():
             setattr(sys.modules[name], k, v)
 

@@ -69,8 +69,10 @@ def _import_common(p) -> None:
     p.add_argument("--tracks", choices=("require", "best"), default="require",
                    help="people without a track id: require a track id wherever a frame "
                         "holds several (default), or follow one person per video: the one "
-                        "nearest the previous frame's pose (a far jump starts a new track "
-                        "and is listed as an identity switch)")
+                        "nearest where the followed pose was heading; a far jump, a sudden "
+                        "change of size, or another person about as near (those frames are "
+                        "not followed) starts a new track, listed as an identity switch "
+                        "with its frame")
     p.add_argument("--skip-short-tracks", action="store_true",
                    help="leave out tracks shorter than a clip (default: an error)")
     p.add_argument("--force", action="store_true", help="replace an existing OUT.h5")

@@ -218,9 +218,16 @@ _OPENPOSE_WORDS = dict(
     several="{n} people without person_id in this frame; run OpenPose with --tracking 1 "
             "(a person_id per person), or follow one person per video ({best})")
 
-#: ``tracks='best'``: a kept pose farther than this (mean joint distance over the previous
-#: pose's box diagonal) from the previous one starts a new track (an identity switch)
+#: ``tracks='best'``: a nearest pose farther than this (mean joint distance over the
+#: followed pose's box diagonal) from where the followed person was heading starts a new
+#: track (an identity switch)
 SWITCH_DISTANCE = 0.5
+#: ``tracks='best'``: a nearest pose whose box diagonal is more than this factor larger or
+#: smaller than the followed one's is someone else (a person nearer the camera in front)
+SIZE_JUMP = 1.5
+#: ``tracks='best'``: another person within this much (box diagonals) of the nearest one's
+#: distance makes a frame ambiguous: the track stops there, the frame is not followed
+AMBIGUOUS_MARGIN = 0.15
 
 
 def _box_of(points, conf) -> tuple:
@@ -241,15 +248,69 @@ def _distance(prev, cand) -> float:
     return float(np.linalg.norm(centre - _box_of(cp, cc)[0])) / diag
 
 
+class _Follower:
+    """One person followed through a video (``tracks='best'``): each frame takes the
+    pose nearest where the followed one was heading (its last pose moved on by its box
+    centre's motion per frame). Never silently someone else: a nearest pose too far
+    (:data:`SWITCH_DISTANCE`) or of another size (:data:`SIZE_JUMP`) starts a new track;
+    a frame where another person is about as close (:data:`AMBIGUOUS_MARGIN`) ends the
+    track and is not followed, and the next clear frame starts a new one. Every new track
+    after the first is a listed identity switch."""
+
+    def __init__(self, video: str, word: str):
+        self.video, self.word, self.track = video, word, -1
+        self.prev = self.frame = self.unclear = None
+        self.velocity = np.zeros(2)
+
+    def _start(self, frame, reason: str, switches: list) -> None:
+        self.track += 1
+        if self.track > 0:
+            switches.append(f"video {self.video!r} {self.word} {frame}: {reason}; track "
+                            f"{self.track - 1} ends, track {self.track} starts")
+        self.velocity, self.unclear = np.zeros(2), None
+
+    def step(self, frame: int, group: list, switches: list):
+        """The row followed in ``frame`` (None: an ambiguous frame, not followed)."""
+        if self.prev is None:
+            pick = max(group, key=lambda g: g[4])
+            self._start(frame, "", switches)
+        else:
+            pts, conf = self.prev
+            ahead = (pts + self.velocity * (frame - self.frame), conf)
+            d = np.array([_distance(ahead, (g[2], g[3])) for g in group])
+            order = np.argsort(d, kind="stable")
+            pick, best = group[order[0]], float(d[order[0]])
+            ratio = _box_of(pick[2], pick[3])[1] / _box_of(pts, conf)[1]
+            close = len(group) > 1 and d[order[1]] <= best + AMBIGUOUS_MARGIN
+            if close and best <= SWITCH_DISTANCE:
+                self.unclear = self.unclear or (frame, float(d[order[1]]), best)
+                return None
+            reason = (f"the nearest person is {best:.2f} box diagonals from where the "
+                      "followed one was heading" if best > SWITCH_DISTANCE else
+                      f"the nearest person is {ratio:.2f} times the followed one's size"
+                      if max(ratio, 1 / ratio) > SIZE_JUMP else None)
+            if reason is None and self.unclear is not None:
+                first, other, near = self.unclear
+                reason = (f"from {self.word} {first} to {frame - 1} another person was "
+                          "about as near where the followed one was heading "
+                          f"({other:.2f} box diagonals against {near:.2f}): who is who "
+                          "cannot be told, those frames are not followed")
+            if reason is not None:
+                self._start(frame, reason, switches)
+            else:
+                step = _box_of(pick[2], pick[3])[0] - _box_of(pts, conf)[0]
+                self.velocity = step / max(frame - self.frame, 1)
+        self.prev, self.frame = (pick[2], pick[3]), frame
+        return pick
+
+
 def _assign_untracked(rows: list, tracks: str, frames: dict, words: dict) -> tuple:
     """Rows ``((video, frame), track or None, points, conf, score, where)``. Rows without a
     track id: track ``"0"`` where alone in their frame; several in one frame are an error
-    with ``tracks='require'``; ``tracks='best'`` follows one person per video: in the first
-    frame the best-scoring one, then in each frame the one nearest the previous kept pose
-    (:func:`_distance`); a nearest one farther than :data:`SWITCH_DISTANCE` is an identity
-    switch and starts the next track (``"1"``, ...). ``frames``: every frame each video
-    has (files or images, with people or not). Returns the kept rows and the notes
-    (:func:`track_notes`)."""
+    with ``tracks='require'``; ``tracks='best'`` follows one person per video
+    (:class:`_Follower`; each identity switch starts the next track, ``"1"``, ...).
+    ``frames``: every frame each video has (files or images, with people or not). Returns
+    the kept rows and the notes (:func:`track_notes`)."""
     by_frame: dict = {}
     for r in rows:
         if r[1] is None:
@@ -261,27 +322,16 @@ def _assign_untracked(rows: list, tracks: str, frames: dict, words: dict) -> tup
     for video, frame in by_frame:
         per_video.setdefault(video, []).append(frame)
     for video in sorted(per_video):
-        prev, track = None, 0
+        follow = _Follower(video, words["image"])
         for frame in sorted(per_video[video]):
             group = by_frame[(video, frame)]
             if len(group) > 1 and tracks == "require":
                 raise BadInput(f"{group[0][5]}: " + words["several"].format(n=len(group),
                                                                           best=best))
-            if prev is None or len(group) == 1 and tracks == "require":
-                pick = max(group, key=lambda g: g[4])
-                gap = None if prev is None else _distance(prev, (pick[2], pick[3]))
-            else:
-                gaps = [_distance(prev, (g[2], g[3])) for g in group]
-                pick = group[int(np.argmin(gaps))]
-                gap = min(gaps)
-            if tracks == "best" and gap is not None and gap > SWITCH_DISTANCE:
-                track += 1
-                switches.append(f"video {video!r} {words['image']} {frame}: the nearest "
-                                f"person is {gap:.2f} box diagonals from the previous one; "
-                                f"track {track - 1} ends, track {track} starts")
-            dropped += len(group) - 1
-            prev = (pick[2], pick[3])
-            keep.append((pick[0], str(track)) + pick[2:])
+            pick = group[0] if tracks == "require" else follow.step(frame, group, switches)
+            dropped += len(group) - (pick is not None)
+            if pick is not None:
+                keep.append((pick[0], str(max(follow.track, 0))) + pick[2:])
     return keep, track_notes(rows, frames, switches, dropped, words)
 
 
