@@ -20,7 +20,7 @@ from pathlib import Path
 
 from .values import format_metric
 
-__all__ = ["format_breakdown", "run_heading", "to_json", "plain", "FORMATS", "COUNTS",
+__all__ = ["format_breakdown", "run_heading", "table_heading", "to_json", "plain", "FORMATS", "COUNTS",
            "format_aggregate", "draw_breakdowns"]
 
 FORMATS = ("md", "markdown", "csv", "json")
@@ -93,6 +93,11 @@ def _preamble(doc: dict) -> list:
     for name, b in doc["bins"].items():
         lines.append(f"bins of {name}, per {b['per']}: " + ", ".join(b["rows"]))
     return lines + [f"note: {n}" for n in doc["notes"]] + [""]
+
+
+def table_heading(title: str, budget: str) -> str:
+    """The heading of a table's ``breakdown.md``."""
+    return f"## {title}: test breakdown, budget {budget}"
 
 
 def run_heading(doc: dict) -> str:

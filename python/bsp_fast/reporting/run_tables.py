@@ -18,9 +18,10 @@ import csv
 import io
 import math
 
+from .._plain_progress import FALLBACK_NOTE, readable
 from .values import format_metric
 
-__all__ = ["table_rows", "format_table", "runs_table", "SETTING_KEYS"]
+__all__ = ["table_rows", "format_table", "runs_table", "scored_text", "SETTING_KEYS"]
 
 #: the config values that make two runs' data settings differ (one initial row each)
 SETTING_KEYS = ("data", "clip_length", "clip_offset", "benchmark", "balance", "noise", "mjp",
@@ -118,3 +119,18 @@ def _merge_csv(parts) -> str:
         for r in t[1:]:
             w.writerow([r[idx[h]] if h in idx else "" for h in header])
     return buf.getvalue().rstrip("\n")
+
+
+def scored_text(res, limit_batches=None) -> str:
+    """What ``bsp-eval RUN`` prints of one scoring (``res``: its ``EvalResult``, read for
+    ``task``, ``model``, ``split``, ``checkpoint``, ``clips``, ``recordings`` and
+    ``metrics``): the clips scored and every metric, the normaliser fallback explained
+    where it is shown."""
+    lines = [f"{res.task} / {res.model}: {res.split} metrics of {res.checkpoint}",
+             f"  scored {res.clips} clips of {res.recordings} recordings"
+             + (f" (--limit-batches {limit_batches})" if limit_batches else "")]
+    shown = readable(res.metrics)
+    lines += [f"  {key:14s} {value:.6g}" for key, value in shown.items()]
+    if "normaliser_fallback" in shown:
+        lines.append(f"  ({FALLBACK_NOTE})")
+    return "\n".join(lines)

@@ -182,10 +182,11 @@ def render_section(table: str, budget: str, results_dir, readme_dir) -> str:
         if doc.get("format") != FORMAT:
             raise ValueError(f"{path}: format {doc.get('format')!r}, this renderer reads "
                              f"{FORMAT}; publish it again (bsp-reproduce ... --publish)")
+    now = table_hash(tab["path"])
     full = path.with_suffix(".md")
     history = [] if doc is not None else sorted(
         results_dir.glob(f"{tab['table']}-{budget}-*seeds*.md"))
-    return section_text(tab, budget, doc=doc, published=path, now=table_hash(tab["path"]),
+    return section_text(tab, budget, doc=doc, published=path, now=now,
                         full=full if full.is_file() else None, history=history,
                         page_dir=readme_dir)
 

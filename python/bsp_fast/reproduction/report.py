@@ -65,11 +65,11 @@ def write_report(tab: dict, res: dict, *, breakdown: bool = False, force: bool =
     seeds), the table's figures and, with ``breakdown``, its breakdown tables into
     ``res["dir"]``; returns ``results.md``'s path."""
     found = findings_of(tab, res)
+    series = None if res.get("seeds") is None else val_series(tab, res)
     text = format_table(tab, res, found)
     log(text)
     base = Path(res["dir"])
-    curves = None if res.get("seeds") is None else learning_curves(tab, res,
-                                                                   val_series(tab, res))
+    curves = None if series is None else learning_curves(tab, res, series)
     figures = draw_figures(tab, res)  # the table's own figures (``figures:``)
     write_text(base / "results.md", text)
     write_text(base / "results.json", json.dumps(

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..reporting.breakdown import COUNTS, draw_breakdowns, format_aggregate, plain
+from ..reporting.breakdown import (COUNTS, draw_breakdowns, format_aggregate, plain,
+                                  table_heading)
 from ..training.tasks import metric_formats
 
 __all__ = ["run_dirs", "run_breakdowns", "aggregate", "table_breakdown", "MD", "JSON"]
@@ -136,8 +137,9 @@ def table_breakdown(tab: dict, res: dict, force: bool = False, log=print) -> lis
         labels = {name: name for name in labels}
     n_seeds = len(res.get("seeds") or [1])
     base = Path(res["dir"])
-    heading = f"## {tab['title']}: test breakdown, budget {res['budget']}"
-    write_text(base / MD, format_aggregate(agg, labels, n_seeds, heading, metric_formats()))
+    write_text(base / MD, format_aggregate(agg, labels, n_seeds,
+                                           table_heading(tab["title"], res["budget"]),
+                                           metric_formats()))
     write_text(base / JSON, json.dumps(plain({"table": tab["table"], "budget": res["budget"],
                                               "seeds": res.get("seeds"), "tables": agg}),
                                        indent=1) + "\n")

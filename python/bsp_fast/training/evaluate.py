@@ -14,7 +14,6 @@ from pathlib import Path
 
 from ..command_line import ArgumentParser, HelpFormatter, run_command
 from . import config as C
-from .._plain_progress import FALLBACK_NOTE, readable
 from .overrides import add_overrides, given_overrides
 from .runs import RunError, check_run_outputs, open_run, resolve_checkpoint, run_inputs, \
     write_json
@@ -267,15 +266,9 @@ def _main(args) -> int:
     if args.json:
         write_json({"task": res.task, "model": res.model, "split": res.split,
                     "checkpoint": str(res.checkpoint), args.split: res.metrics}, args.json)
-    print(f"{res.task} / {res.model}: {res.split} metrics of {res.checkpoint}")
-    print(f"  scored {res.clips} clips of {res.recordings} recordings"
-          + (f" (--limit-batches {args.limit_batches})"
-             if getattr(args, "limit_batches", None) else ""))
-    shown = readable(res.metrics)
-    for key, value in shown.items():
-        print(f"  {key:14s} {value:.6g}")
-    if "normaliser_fallback" in shown:
-        print(f"  ({FALLBACK_NOTE})")
+    from ..reporting.run_tables import scored_text
+
+    print(scored_text(res, getattr(args, "limit_batches", None)))
     return 0
 
 
