@@ -109,8 +109,14 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out-3d", metavar="OUT_3D.npz",
                    help="also the H36M-17 3D joints (metres), e.g. data_3d_custom_NAME.npz; "
                         "an error for a 2D-only (imported) file")
-    v.add_argument("--frame", choices=FRAMES_3D, default="camera",
-                   help="3D frame: camera (OpenCV axes), world, absolute (walker)")
+    v.add_argument("--frame", choices=FRAMES_3D,
+                   help="3D frame: camera (OpenCV axes; the default), world, absolute "
+                   "(walker), ground (z up, on the ground under the camera; with each "
+                   "subject's camera)")
+    v.add_argument("--viewer", action="store_true",
+                   help="what VideoPose3D's render draws as it is: every subject starts at "
+                   "its video's frame 0 (the first pose held before it; render with "
+                   "--viz-video VIDEO --viz-skip START_FRAME) and the 3D in the ground frame")
     v.add_argument("--joints", default="coco17",
                    help="2D joint set (default coco17, what VideoPose3D's in-the-wild models "
                         "take; h36m17)")
@@ -206,7 +212,8 @@ def _run(a) -> str:
     if a.command == "export":
         common = dict(joints=a.joints, split=a.split, derive=not a.no_derive, force=a.force)
         if a.format == "videopose3d":
-            r = export_videopose3d(a.input, a.out, a.out_3d, frame_3d=a.frame, **common)
+            r = export_videopose3d(a.input, a.out, a.out_3d, frame_3d=a.frame,
+                                   viewer=a.viewer, **common)
             lines = [f"wrote {a.out}" + (f" and {a.out_3d}" if a.out_3d else "")
                      + ": subjects (one per video/track run) "
                      + ", ".join(f"{s} {n}" for s, n in r["subjects"].items())

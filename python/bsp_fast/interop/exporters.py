@@ -33,11 +33,12 @@ from ..conversion.vds import open_clip_file
 from ..skeletons import CARLA, joint_set, skeleton_map
 from .readers import BadInput, option
 
-__all__ = ["read_clips", "export_videopose3d", "export_coco", "FRAMES_3D", "SPLIT_CHOICES",
+__all__ = ["read_clips", "export_videopose3d", "export_coco", "ground_frame", "FRAMES_3D",
+           "SPLIT_CHOICES",
            "FILLED_JOINTS", "COCO_SKELETON", "VIDEOPOSE3D_LAYOUTS"]
 
 SPLIT_CHOICES = ("train", "val", "test", "all")
-FRAMES_3D = ("camera", "world", "absolute")
+FRAMES_3D = ("camera", "world", "absolute", "ground")
 
 #: VideoPose3D's names of our joint sets (``data/data_utils.py``: ``coco_metadata``,
 #: ``h36m_metadata``; its visualisation tests ``layout_name != 'coco'``)
@@ -92,6 +93,8 @@ def read_clips(h5_path, split: str = "all", frame_3d: str | None = None) -> dict
                 d["clip_frames"] = g["clip_frames"][()]
             if frame_3d is not None:
                 d["xyz"] = _points_3d(g, frame_3d, h5_path)
+            if frame_3d == "ground":
+                d["camera"] = g["meta/camera_transform"][()].astype(np.float64)
             out[s] = d
     return out
 
@@ -101,7 +104,7 @@ def _points_3d(g, frame: str, h5_path) -> np.ndarray:
     from ..geometry import invert, transform_points
 
     name = "targets/absolute_pose_loc" if frame == "absolute" else "targets/world_pose_loc"
-    if name not in g or (frame == "camera" and "meta/camera_transform" not in g):
+    if name not in g or (frame in ("camera", "ground") and "meta/camera_transform" not in g):
         raise BadInput(f"{h5_path}: /{g.name.strip('/')} has no {name} (3D targets): a 2D-only "
                        "file (e.g. imported detections) has no 3D to export; leave out "
                        + option("out_3d", "--out-3d") + " to export the 2D only; nothing "
@@ -172,8 +175,62 @@ def _runs(data: dict, with_3d: bool) -> list:
                        present=np.stack([c["present"][i, k] for c, i, k in src]))
             if with_3d:
                 run["xyz"] = np.stack([c["xyz"][i, k] for c, i, k in src])
+                if "camera" in src[0][0]:
+                    run["camera"] = src[0][0]["camera"][src[0][1]]
             out.append(run)
     return out
+
+
+def _quaternion(R: np.ndarray) -> np.ndarray:
+    """A rotation matrix as VideoPose3D's quaternion (w, x, y, z; its ``common/
+    quaternion.py`` ``qrot``)."""
+    w = np.sqrt(max(1.0 + R[0, 0] + R[1, 1] + R[2, 2], 0.0)) / 2
+    if w > 1e-6:
+        return np.array([w, (R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w),
+                         (R[1, 0] - R[0, 1]) / (4 * w)])
+    i = int(np.argmax(np.diag(R)))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    v = np.zeros(4)
+    v[1 + i] = np.sqrt(max(1.0 + R[i, i] - R[j, j] - R[k, k], 0.0)) / 2
+    v[0] = (R[k, j] - R[j, k]) / (4 * v[1 + i])
+    v[1 + j] = (R[j, i] + R[i, j]) / (4 * v[1 + i])
+    v[1 + k] = (R[k, i] + R[i, k]) / (4 * v[1 + i])
+    return v
+
+
+def ground_frame(world: np.ndarray, camera) -> tuple:
+    """CARLA world points ``(..., 3)`` of one subject -> the **ground frame** of its
+    camera: right-handed, z up, y the camera's heading on the ground, x to its right,
+    origin on the ground under the camera (the ground: the subject's lowest joint). Also
+    the camera there, as VideoPose3D's ``camera_to_world`` takes it: ``(points,
+    orientation (w, x, y, z), translation)``; its ``world_to_camera`` of the points gives
+    the camera frame (OpenCV axes) of ``--frame camera``."""
+    from ..data.camera import opencv_to_carla
+    from ..geometry import transform_points
+
+    camera = np.asarray(camera, np.float64)
+    yaw = np.radians(camera[4])
+    heading, right = np.array([np.cos(yaw), np.sin(yaw), 0.0]), \
+        np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+    ground = float(world[..., 2].min())
+
+    def to_ground(w):
+        d = w - np.array([camera[0], camera[1], 0.0])
+        return np.stack([d @ right, d @ heading, w[..., 2] - ground], -1)
+
+    axes = transform_points(camera, opencv_to_carla(np.vstack([np.zeros(3), np.eye(3)])))
+    at = to_ground(axes)
+    return to_ground(world), _quaternion((at[1:] - at[0]).T), at[0]
+
+
+def _viewer_run(uv, xyz, r: dict) -> tuple:
+    """``--viewer``: a run padded to start at its video's frame 0 (the first pose held over
+    the frames before it, as VideoPose3D pads at the edges), so that the pose of video
+    frame ``n`` is row ``n``: what run.py's render (``--viz-video``, ``--viz-skip``)
+    pairs with the video's frames."""
+    pad = int(r["frames"][0])
+    hold = lambda a: None if a is None else np.concatenate([np.repeat(a[:1], pad, 0), a])  # noqa: E731
+    return hold(uv), hold(xyz), pad
 
 
 def _subject_names(runs: list) -> list:
@@ -203,14 +260,22 @@ def _subject_names(runs: list) -> list:
 
 
 def export_videopose3d(h5_path, out_2d, out_3d=None, *, joints="coco17", split: str = "all",
-                       frame_3d: str = "camera", derive: bool = True,
+                       frame_3d: str | None = None, viewer: bool = False, derive: bool = True,
                        force: bool = False) -> dict:
     """Writes ``out_2d``, the ``data_2d_custom_NAME.npz`` of VideoPose3D's ``run.py -d
     custom -k NAME``, with the 2D ``joints`` set (``coco17``, what its in-the-wild models
     take; ``h36m17``; others keep our layout name), and ``out_3d`` (H36M-17, metres, in
-    ``frame_3d`` = ``camera`` (OpenCV axes, what VideoPose3D trains on), ``world`` or
-    ``absolute`` (the walker's frame)). Module docstring: subjects, filling, no NaN.
-    Returns counts, the subjects per split and the runs left out."""
+    ``frame_3d`` = ``camera`` (OpenCV axes, what VideoPose3D trains on; the default),
+    ``world``, ``absolute`` (the walker's frame) or ``ground`` (:func:`ground_frame`, with
+    each subject's camera in the 3D metadata)). ``viewer``: what VideoPose3D's render
+    expects: every subject starts at its video's frame 0 (:func:`_viewer_run`) and the 3D
+    is in the ground frame. Module docstring: subjects, filling, no NaN. Returns counts,
+    the subjects per split and the runs left out."""
+    if viewer and frame_3d not in (None, "ground"):
+        raise ValueError(f"the viewer export writes its 3D in the ground frame (z up), not "
+                         f"{frame_3d!r}: leave out {option('frame_3d', '--frame')} or give "
+                         "ground")
+    frame_3d = frame_3d or ("ground" if viewer else "camera")
     dst = joint_set(joints)
     m = skeleton_map(CARLA, dst, derive)
     rules = _fill_rules(dst, m)
@@ -221,7 +286,7 @@ def export_videopose3d(h5_path, out_2d, out_3d=None, *, joints="coco17", split: 
     h36m = joint_set("h36m17")
     m3 = skeleton_map(CARLA, h36m, derive)
     rules3 = _fill_rules(h36m, m3)
-    pos2d, pos3d, video_meta, source = {}, {}, {}, {}
+    pos2d, pos3d, video_meta, source, cameras = {}, {}, {}, {}, {}
     subjects = {s: [] for s in data}
     dropped, filled = [], 0
     for name, r in zip(_subject_names(runs), runs):
@@ -234,14 +299,23 @@ def export_videopose3d(h5_path, out_2d, out_3d=None, *, joints="coco17", split: 
                            + ", ".join(dst.joints[j] for j in never))
             continue
         filled += n
+        xyz = None
+        if out_3d is not None:  # ground truth: every joint is known, seen or not
+            world = r["xyz"].astype(np.float64)
+            if frame_3d == "ground":
+                world, q, t = ground_frame(world, r["camera"])
+                cameras[name] = {"orientation": q.astype(np.float32).tolist(),
+                                 "translation": t.astype(np.float32).tolist()}
+            xyz, ok3 = m3.apply(world, fill=np.nan)
+            _apply_fills(xyz, ok3, rules3)
+        uv, xyz, pad = _viewer_run(uv, xyz, r) if viewer else (uv, xyz, 0)
         pos2d[name] = {"custom": [uv.astype(np.float32)]}
         video_meta[name] = {"w": int(r["w"]), "h": int(r["h"])}
         subjects[r["split"]].append(name)
         source[name] = {"split": r["split"], "video": r["video"], "track": r["track"],
-                        "start_frame": int(r["frames"][0]), "end_frame": int(r["frames"][-1]) + 1}
-        if out_3d is not None:  # ground truth: every joint is known, seen or not
-            xyz, ok3 = m3.apply(r["xyz"].astype(np.float64), fill=np.nan)
-            _apply_fills(xyz, ok3, rules3)
+                        "start_frame": int(r["frames"][0]), "end_frame": int(r["frames"][-1]) + 1,
+                        "padded_frames": pad}
+        if xyz is not None:
             pos3d[name] = {"custom": xyz.astype(np.float32)}
     if not pos2d:
         raise BadInput(f"{h5_path}: every run misses a joint in all its frames ("
@@ -257,6 +331,7 @@ def export_videopose3d(h5_path, out_2d, out_3d=None, *, joints="coco17", split: 
     if out_3d is not None:
         meta3 = {"layout_name": "h36m", "num_joints": len(h36m),
                  "joint_names": list(h36m.joints), "units": "metres", "frame": frame_3d,
+                 "cameras": cameras,
                  "filled_joints": {h36m.joints[j]: " + ".join(
                      f"{w:g}*{h36m.joints[s]}" for s, w in rule) for j, rule in rules3.items()}}
         targets.append((out_3d, dict(positions_3d=pos3d, metadata=meta3), _save_npz))
