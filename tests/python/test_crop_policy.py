@@ -157,7 +157,7 @@ def test_policy_round_trip_and_refusal_names_the_option(sample, default_file, tm
 def test_pose_estimation_table_refuses_a_file_of_another_policy(sample, default_file, tmp_path):
     """Every row of the pose-estimation table reads mask-box crops; a mask+joints file is
     refused with a message naming both policies, except for the row that asks for it."""
-    from bsp_fast.reproduction import reproduce
+    from bsp_fast.reproduction import run_table as reproduce
 
     union = tmp_path / "union.h5"
     with pytest.warns(UserWarning):

@@ -350,7 +350,7 @@ def test_full_budget_rows_run_two_batches_on_the_cpu(table, data, tmp_path):
     # a row asking for mask+joints crops needs a file (or conversion) of its own: these
     # files are mask-box files (tests/python/test_crop_policy.py checks the refusal)
     rows = [r["name"] for r in tab["rows"] if r.get("crop_box", "mask") == "mask"]
-    res = R.reproduce(tab, data[table], "full", tmp_path, overrides=over, rows=rows,
+    res = R.run_table(tab, data[table], "full", tmp_path, overrides=over, rows=rows,
                       log=lambda s: 0)
     assert sorted(res["results"]) == sorted(rows)
     for name, r in res["results"].items():

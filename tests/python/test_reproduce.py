@@ -47,7 +47,7 @@ def test_tables_resolve_to_bsp_train_configs(table, tmp_path):
     assert set(tab["budgets"]) == {"smoke", "quick", "full"}
     assert tab["budgets"]["full"]["accelerator"] == "gpu"
     assert tab["budgets"]["quick"]["accelerator"] == "cpu"
-    R.reproduce(tab, tmp_path / "data", "quick", tmp_path / "runs", dry_run=True, log=lambda s: 0)
+    R.run_table(tab, tmp_path / "data", "quick", tmp_path / "runs", dry_run=True, log=lambda s: 0)
     cfgs = sorted((tmp_path / "runs" / f"{table}-quick" / "configs").glob("*.yaml"))
     trained = [r["name"] for r in tab["rows"] if not r.get("initial_of")]
     assert [p.stem for p in cfgs] == sorted(trained)
@@ -99,7 +99,7 @@ def test_bad_arguments(tmp_path, capsys):
     with pytest.raises(ValueError, match="unknown table 'nope'; allowed: lifting"):
         R.load_table("nope")
     with pytest.raises(ValueError, match=r"unknown row\(s\) \['x'\].*allowed: poseformer"):
-        R.reproduce("lifting", tmp_path, "smoke", tmp_path, rows=["x"], dry_run=True)
+        R.run_table("lifting", tmp_path, "smoke", tmp_path, rows=["x"], dry_run=True)
     assert R.main(["lifting", "--data", str(tmp_path), "--set", "epochs=-1", "--dry-run",
                    "--out", str(tmp_path)]) == 2
     assert "epochs must be >= 1" in capsys.readouterr().err

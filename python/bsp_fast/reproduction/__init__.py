@@ -11,12 +11,11 @@ from __future__ import annotations
 from .cli import build_parser, main
 from .findings import NA, NO, YES, evaluate_findings
 from .report import format_report, write_report
-from .runner import reproduce, reproduce_seeds, run_table, seed_list
+from .runner import run_table, seed_list
 from .table_files import (BUDGETS, KINDS, RELATIONS, TABLES, experiments_dir,
                           experiments_dirs, load_table, row_options, table_names)
 from ..training.tasks.classification import constant_f1
 
 __all__ = ["TABLES", "BUDGETS", "KINDS", "RELATIONS", "YES", "NO", "NA", "experiments_dir",
-           "experiments_dirs", "load_table", "row_options", "table_names", "reproduce",
-           "reproduce_seeds", "run_table", "seed_list", "evaluate_findings", "format_report",
+           "experiments_dirs", "load_table", "row_options", "table_names", "run_table", "seed_list", "evaluate_findings", "format_report",
            "write_report", "main", "build_parser", "constant_f1"]

@@ -27,7 +27,8 @@ import numpy as np
 
 from ..metrics import hierarchical as H
 from ..metrics import uncertainty as U
-from ..reporting.values import format_value
+from ..reporting.findings import (difference_label, fails_baseline, fails_label, seeds_text,
+                                 threshold_label)
 from .findings import better as _sign
 from .protocol import confirmatory
 
@@ -157,9 +158,9 @@ def _clips(part: dict, path) -> list:
 
 
 def _clip_fn(metric: str):
-    from importlib import import_module
+    from ..metrics import ranking
 
-    return getattr(import_module("bsp_fast.metrics.ranking"), CLIP_METRICS[metric])
+    return getattr(ranking, CLIP_METRICS[metric])
 
 
 def _row(seeds: list, recs: list, empty: float, metric: str):
@@ -269,11 +270,11 @@ def _pieces(tab, f) -> list:
     out = []
     if k == "order":
         for a, b in zip(f["rows"], f["rows"][1:]):
-            out.append((f"{a} − {b}", [(a, m, False), (b, m, False)],
+            out.append((difference_label(a, b), [(a, m, False), (b, m, False)],
                         lambda v: v[0] - v[1], sign, (0, 1)))
     elif k == "compare":
         off, side = _relation(f.get("relation", ">="), f.get("margin", 0.0))
-        out.append((f"{f['a']} − {f['b']}" + (f" {off:+g}" if off else ""),
+        out.append((difference_label(f["a"], f["b"], off),
                     [(f["a"], m, False), (f["b"], m, False)],
                     lambda v: v[0] - v[1] + off, side, (0, 1)))
     elif k == "drop":
@@ -285,30 +286,19 @@ def _pieces(tab, f) -> list:
                                         (b1, m, False)],
                     lambda v: sign * (v[2] - v[3]) - sign * (v[0] - v[1]), 1, None))
     elif k == "at_least":
-        out.append((f"{f['row']} − {format_value(tab, m, f['value'])}",
+        out.append((threshold_label(tab, f),
                     [(f["row"], m, False)], lambda v: v[0] - f["value"], 1, None))
     elif k == "fails":
         base = "f1_constant" if f.get("baseline") == "constant" else m
         margin = f.get("margin", 0.0)
-        out.append((f"{f['row']} − ({_baseline_name(tab, f)} {margin:+g})",
+        out.append((fails_label(f["row"], fails_baseline(tab, f), margin),
                     [(f["row"], m, False), (f["row"], base, True)],
                     lambda v: sign * (v[0] - v[1]) - margin, -1, (0, 1)))
     else:  # beats_initial
         for r in f["rows"]:
-            out.append((f"{r} − trivial", [(r, m, False), (r, m, True)],
+            out.append((difference_label(r, "trivial"), [(r, m, False), (r, m, True)],
                         lambda v: v[0] - v[1], sign, (0, 1)))
     return out
-
-
-def _baseline_name(tab: dict, f: dict) -> str:
-    """The name of the answer a ``fails`` finding compares with: the always-crossing
-    constant (``baseline: constant``, not the table's trivial column) or the trivial
-    baseline the table's column shows."""
-    from ..training.tasks import get_task
-
-    if f.get("baseline") == "constant":
-        return "always-crossing answer"
-    return f"trivial baseline ({get_task(tab['task']).baseline})"
 
 
 def _margin(tab: dict, f: dict) -> float:
@@ -375,24 +365,12 @@ def _modes(sums: _Sums, parts: list) -> str | None:
             + ", ".join(f"{r} {'/'.join(s)}" for r, s in split.items()) + ")")
 
 
-def _num(tab, m, v) -> str:
-    return format_value(tab, m, v, True)
-
-
 def _finding(tab, f, c: dict) -> dict:
-    """The printed text and the fields of one computed finding (``c["pieces"]`` carry
-    their Holm-adjusted p as ``p_holm``)."""
-    m = f["metric"]
-    pp = " p.p." if tab["metrics"][m].get("format") == "pct" else ""
-    pieces, texts, marks = c["pieces"], [], []
-    for q in pieces:
-        t, s = q["test"], q["seeds_only"]
-        marks.append(U.UNSURE if q["rule"] else U.decide(t.value, q["p_holm"], q["side"]))
-        text = (f"{q['label']} {_num(tab, m, t.value)}{pp} [{_num(tab, m, t.low)}, "
-                f"{_num(tab, m, t.high)}] (seeds only [{_num(tab, m, s.low)}, "
-                f"{_num(tab, m, s.high)}])")
-        texts.append(text + (f" ({marks[-1]}{' by rule' if q['rule'] else ''})"
-                             if len(pieces) > 1 else ""))
+    """The fields of one computed finding (``c["pieces"]`` carry their Holm-adjusted p as
+    ``p_holm``) and its ``ours`` cell (:func:`bsp_fast.reporting.findings.seeds_text`)."""
+    pieces = c["pieces"]
+    marks = [U.UNSURE if q["rule"] else U.decide(q["test"].value, q["p_holm"], q["side"])
+             for q in pieces]
     status = U.combine_marks(marks)
     first = pieces[0]["test"]
     # the rule is printed where it decided the mark (a finding left inconclusive)
@@ -405,19 +383,15 @@ def _finding(tab, f, c: dict) -> dict:
            "p_improvement": [None if q["poi"] is None else
                              {"value": q["poi"].value, "interval": [q["poi"].low, q["poi"].high]}
                              for q in pieces]}
+    size = baseline = None
     if f["kind"] == "drop" and f.get("report") is not None:
         margin = _margin(tab, f)
         verdict = None if pieces[0]["rule"] else U.equivalence(first, f["report"], margin)
-        size = f"{format_value(tab, m, f['report'])}{pp} ± {format_value(tab, m, margin)}"
-        texts.append({U.AGREES: f"size agrees with the report's {size} (interval inside)",
-                      U.DIFFERS: f"size differs from the report's {size} (interval outside)",
-                      U.UNDETERMINED: f"size undetermined against the report's {size} "
-                                      "(interval not inside)",
-                      None: f"size not judged against the report's {size} (by rule)"}[verdict])
+        size = (margin, verdict)
         out["size"] = {"report": f["report"], "equivalence_margin": margin, "verdict": verdict}
     if f["kind"] == "fails":  # the baseline's value, which the table's columns may not show
-        texts.append(f"{_baseline_name(tab, f)}: {_num(tab, m, pieces[0]['values'][1])}")
-    out["ours"] = "; ".join(texts)
+        baseline = (fails_baseline(tab, f), pieces[0]["values"][1])
+    out["ours"] = seeds_text(tab, f, pieces, marks, size=size, baseline=baseline)
     return out
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..atomic import write_text
@@ -31,8 +32,8 @@ from .restore import RESTORED_KEY, restorable
 from .table_files import (BUDGETS, RULE_KEYS, check_budget_rule, load_table, prepare_row_data,
                           row_options, wanted_rows)
 
-__all__ = ["RULE_KEYS", "check_budget_rule", "seed_list", "run_table", "reproduce",
-           "reproduce_seeds", "add_options"]
+__all__ = ["RULE_KEYS", "check_budget_rule", "seed_list", "run_table", "plan_table",
+           "collect_table", "TablePlan", "add_options"]
 
 def seed_list(n: int, base: int = SEED) -> list:
     """The training seeds of ``--seeds n``: ``base, base + 1, ...`` (the first is a
@@ -267,6 +268,29 @@ def _seed_result(run_dir: Path) -> dict:
             "machine": run["config"].get("machine")}
 
 
+@dataclass
+class TablePlan:
+    """What a table's call will do, decided before any training: the rows and seeds, each
+    run's folder, config file and fate (read from a published table, reused, trained),
+    and the protocol record they are checked against."""
+    tab: dict
+    budget: str
+    base: Path  # OUT/TABLE-BUDGET
+    data: object
+    seeds: list | None  # None: the single-run table (ROW/ folders, the options' seed)
+    split_seeds: bool
+    jobs: int
+    wanted: list
+    names: dict  # {run name: run folder}
+    restored: dict  # {run name: (result, protocol record, cost)} from --with-published
+    protocol: dict
+    ledger: dict
+    runs: list = field(default_factory=list)  # (row, seed, run_dir, opts)
+    todo: list = field(default_factory=list)  # (label, config file, stopped run or None)
+    fresh: list = field(default_factory=list)  # run names trained from scratch
+    slow: list = field(default_factory=list)  # rows in bf16 on a CPU
+
+
 def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | None = None,
               split_seeds: bool = False, jobs: int | None = None, rows=None, overrides=None,
               force: bool = False, quiet: bool = True, dry_run: bool = False,
@@ -274,7 +298,8 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
     """Trains the rows of ``table`` (all, or the names in ``rows``), reusing finished runs
     unless ``force``, and returns ``{"table", "budget", "dir", "data", "seeds",
     "split_seeds", "protocol", "results": {row: {"seeds": {seed: {...one run...}},
-    "source", "noise", "mjp", "cost"}}}``.
+    "source", "noise", "mjp", "cost"}}}``: :func:`plan_table`, then the training of what
+    the plan leaves to train (:func:`_train_planned`), then :func:`collect_table`.
 
     Before anything is written, the runs it would reuse or continue are checked against
     the folder's protocol ledger (:func:`.protocol.guard`): one made under another version
@@ -291,13 +316,30 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
     ``with_published=DIR`` (with seeds): the runs of the wanted rows with no run here are
     read from the published table in ``DIR`` where it has them (:mod:`.restore`), under
     their own protocol record; ``protocol["restored"]`` names them."""
-    tab = table if isinstance(table, dict) else load_table(table)
+    plan = plan_table(table, data, budget, out, seeds=seeds, split_seeds=split_seeds,
+                      jobs=jobs, rows=rows, overrides=overrides, force=force,
+                      dry_run=dry_run, allow_changed=allow_changed,
+                      with_published=with_published, log=log)
+    out_res = {"table": plan.tab["table"], "budget": budget, "dir": str(plan.base),
+               "data": str(data), "seeds": plan.seeds, "split_seeds": bool(split_seeds),
+               "results": {}}
+    if dry_run:
+        return out_res
+    record_runs(plan.base, plan.protocol, plan.ledger, plan.fresh)  # interrupted runs count
+    out_res["protocol"] = dict(plan.protocol,
+                               runs={n: plan.ledger["runs"].get(n) for n in plan.names})
+    if plan.restored:
+        out_res["protocol"]["restored"] = sorted(plan.restored)
+    _train_planned(plan, quiet, log)
+    out_res["results"] = collect_table(plan, force, quiet, log)
+    return out_res
+
+
+def _check_call(budget: str, seed_values, jobs, split_seeds: bool, data) -> int:
+    """The call's arguments checked; returns the processes to train with."""
     if budget not in BUDGETS:
         raise ValueError(f"budget must be one of {list(BUDGETS)}, got {budget!r}")
-    seed_values = None if seeds is None else seed_list(seeds)
-    if seed_values is None:
-        jobs = 1
-    jobs = (os.cpu_count() or 1) if jobs is None else jobs
+    jobs = 1 if seed_values is None else ((os.cpu_count() or 1) if jobs is None else jobs)
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
     if split_seeds and seed_values is None:
@@ -305,6 +347,17 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
     if split_seeds and Path(data).suffix in (".h5", ".hdf5"):
         raise ValueError("--split-seeds needs a dataset directory: an HDF5 file holds one "
                          "split")
+    return jobs
+
+
+def plan_table(table, data, budget: str, out, *, seeds=None, split_seeds=False, jobs=None,
+               rows=None, overrides=None, force=False, dry_run=False, allow_changed=False,
+               with_published=None, log=print) -> TablePlan:
+    """The :class:`TablePlan` of a call of :func:`run_table`; writes each run's config
+    file (``bsp-train --config``), nothing else."""
+    tab = table if isinstance(table, dict) else load_table(table)
+    seed_values = None if seeds is None else seed_list(seeds)
+    jobs = _check_call(budget, seed_values, jobs, split_seeds, data)
     wanted = wanted_rows(tab, rows)
     base = Path(out) / f"{tab['table']}-{budget}"
     names = _run_names(tab, wanted, seed_values, base, budget)
@@ -320,66 +373,76 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
     protocol, ledger = guard(base, tab, budget, [*kept, *restored], overrides,
                              allow_changed=allow_changed,
                              known={n: rec for n, (_, rec, _) in restored.items()})
-    plan = _plan(tab, data, budget, base, wanted, seed_values, split_seeds, overrides,
-                 1 if jobs > 1 else None, convert=not dry_run)
+    plan = TablePlan(tab, budget, base, data, seed_values, bool(split_seeds), jobs, wanted,
+                     names, restored, protocol, ledger)
+    plan.runs = _plan(tab, data, budget, base, wanted, seed_values, split_seeds, overrides,
+                      1 if jobs > 1 else None, convert=not dry_run)
+    for run in plan.runs:
+        _decide(plan, run, force, dry_run, log)
+    return plan
+
+
+def _decide(plan: TablePlan, run, force: bool, dry_run: bool, log) -> None:
+    """Writes one run's config file and files the run under what will happen to it."""
     import yaml
 
-    todo, fresh, slow = [], [], []
-    for row, seed, run_dir, opts in plan:
-        run_name = str(run_dir.relative_to(base))  # as the ledger and `restored` name it
-        label = row["name"] if seed is None else f"{row['name']} seed {seed}"
-        name = row["name"] if seed is None else f"{row['name']}-seed-{seed}"
-        cfg_path = base / "configs" / f"{name}.yaml"
-        cfg_path.parent.mkdir(parents=True, exist_ok=True)
-        what = "one row" if seed is None else "one row and seed"
-        write_text(cfg_path, f"# bsp-reproduce: {what}, usable as bsp-train --config\n"
-                   + yaml.safe_dump(opts, sort_keys=False))
-        if dry_run:
-            log(f"bsp-train --config {cfg_path}")
-        elif run_name in restored:
-            log(f"[{label}] read from the published {restored[run_name][1][RESTORED_KEY]}")
-        elif (run_dir / "metrics.json").is_file() and not force:
-            log(f"[{label}] reusing {run_dir} (--force to train again)")
-        else:  # an interrupted run of an earlier call continues (unless --force)
-            todo.append((label, cfg_path, None if force else resumable(run_dir)))
-            if todo[-1][2] is None:
-                fresh.append(run_name)
-            if str(opts.get("precision")).startswith("bf16") and opts.get("accelerator",
-                                                                          "cpu") == "cpu":
-                slow.append(row["name"])
-    if slow:
+    row, seed, run_dir, opts = run
+    run_name = str(run_dir.relative_to(plan.base))  # as the ledger and `restored` name it
+    label = row["name"] if seed is None else f"{row['name']} seed {seed}"
+    name = row["name"] if seed is None else f"{row['name']}-seed-{seed}"
+    cfg_path = plan.base / "configs" / f"{name}.yaml"
+    cfg_path.parent.mkdir(parents=True, exist_ok=True)
+    what = "one row" if seed is None else "one row and seed"
+    write_text(cfg_path, f"# bsp-reproduce: {what}, usable as bsp-train --config\n"
+               + yaml.safe_dump(opts, sort_keys=False))
+    if dry_run:
+        log(f"bsp-train --config {cfg_path}")
+    elif run_name in plan.restored:
+        log(f"[{label}] read from the published {plan.restored[run_name][1][RESTORED_KEY]}")
+    elif (run_dir / "metrics.json").is_file() and not force:
+        log(f"[{label}] reusing {run_dir} (--force to train again)")
+    else:  # an interrupted run of an earlier call continues (unless --force)
+        plan.todo.append((label, cfg_path, None if force else resumable(run_dir)))
+        if plan.todo[-1][2] is None:
+            plan.fresh.append(run_name)
+        if str(opts.get("precision")).startswith("bf16") and \
+                opts.get("accelerator", "cpu") == "cpu":
+            plan.slow.append(row["name"])
+
+
+def _train_planned(plan: TablePlan, quiet: bool, log) -> None:
+    """Trains (or continues) every run the plan left to train."""
+    if plan.slow:
         from ..training.precision import native_bf16
 
         if not native_bf16("cpu"):  # said once, before hours of training, not per run
-            log(f"note: rows {', '.join(dict.fromkeys(slow))} are set to bf16-mixed (by the "
-                "table file or --set), and this CPU has no native bf16 (AVX512-BF16/AMX): "
-                "they train several times slower than in float32 (x0.06-x0.20 measured for the "
-                "convolutional and transformer models; docs/performance.md, 'A real "
-                "AVX2-only CPU'). --set precision=32 trains them in float32, recorded as "
-                "other options (docs/reproduce.md, 'Registered protocol')")
-    out_res = {"table": tab["table"], "budget": budget, "dir": str(base), "data": str(data),
-               "seeds": seed_values, "split_seeds": bool(split_seeds), "results": {}}
-    if dry_run:
-        return out_res
-    record_runs(base, protocol, ledger, fresh)  # before training: interrupted runs count
-    out_res["protocol"] = dict(protocol, runs={n: ledger["runs"].get(n) for n in names})
-    if restored:
-        out_res["protocol"]["restored"] = sorted(restored)
-    if todo:
-        if jobs > 1:
-            _convert_once(plan)
-            log(f"training {len(todo)} run(s), {min(jobs, len(todo))} at a time")
-        _run(todo, jobs, quiet, log)
-    results, published_cost = out_res["results"], {}
-    for row, seed, run_dir, _ in plan:
+            log(f"note: rows {', '.join(dict.fromkeys(plan.slow))} are set to bf16-mixed (by "
+                "the table file or --set), and this CPU has no native bf16 (AVX512-BF16/"
+                "AMX): they train several times slower than in float32 (x0.06-x0.20 "
+                "measured for the convolutional and transformer models; docs/performance.md,"
+                " 'A real AVX2-only CPU'). --set precision=32 trains them in float32, "
+                "recorded as other options (docs/reproduce.md, 'Registered protocol')")
+    if not plan.todo:
+        return
+    if plan.jobs > 1:
+        _convert_once(plan.runs)
+        log(f"training {len(plan.todo)} run(s), {min(plan.jobs, len(plan.todo))} at a time")
+    _run(plan.todo, plan.jobs, quiet, log)
+
+
+def collect_table(plan: TablePlan, force: bool, quiet: bool, log) -> dict:
+    """``{row: {"seeds": {seed: one run}, "source", "noise", "mjp", "cost"}}`` of the
+    planned runs, read back from their folders (or the published table)."""
+    results, published_cost = {}, {}
+    for row, seed, run_dir, _ in plan.runs:
         r = results.setdefault(row["name"], {"seeds": {}, "source": "test"})
-        back = restored.get(str(run_dir.relative_to(base)))
+        back = plan.restored.get(str(run_dir.relative_to(plan.base)))
         if back:  # published with its noisy-box scores, where the table has them
             r["seeds"][str(seed)] = one = back[0]
             published_cost.setdefault(row["name"], back[2])
         else:
             r["seeds"][str(SEED if seed is None else seed)] = one = _seed_result(run_dir)
-            one["metrics"].update(noisy_box_metrics(tab, run_dir, force, quiet, log))
+            one["metrics"].update(noisy_box_metrics(plan.tab, run_dir, force, quiet, log))
         r["noise"], r["mjp"] = one["noise"], one["mjp"]
         if seed is None:  # the single run's own numbers, as the one-run report reads them
             r.update({k: one[k] for k in ("metrics", "initial", "baseline", "epochs",
@@ -387,26 +450,19 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
     for name, r in results.items():  # parameters and FLOPs of the row's model, its first run
         first = next(iter(r["seeds"].values()))["run"]
         r["cost"] = run_cost(first) if first else published_cost.get(name, {})
-    for row in tab["rows"]:  # rows read from another row's trivial baseline
+    _initial_rows(plan, results)
+    return results
+
+
+def _initial_rows(plan: TablePlan, results: dict) -> None:
+    """Rows read from another row's trivial baseline (``initial_of``)."""
+    for row in plan.tab["rows"]:
         src = row.get("initial_of")
-        if row["name"] in wanted and src and src in results:
+        if row["name"] in plan.wanted and src and src in results:
             r = results[row["name"]] = dict(results[src], source="initial", run_of=src)
-            if seed_values is None:
-                r.update(metrics=dict(r["initial"]), epochs=None, best_epoch=None, seconds={},
-                         run=r["run"] + " (initial metrics)")
+            if plan.seeds is None:
+                r.update(metrics=dict(r["initial"]), epochs=None, best_epoch=None,
+                         seconds={}, run=r["run"] + " (initial metrics)")
             r["cost"] = {}  # no model of its own
-    return out_res
 
 
-def reproduce(table, data, budget: str = "quick", out="runs", rows=None, overrides=None,
-              force: bool = False, quiet: bool = True, dry_run: bool = False,
-              log=print) -> dict:
-    """The single-run table: :func:`run_table` with one seed per row (``ROW/`` layout)."""
-    return run_table(table, data, budget, out, rows=rows, overrides=overrides, force=force,
-                     quiet=quiet, dry_run=dry_run, log=log)
-
-
-def reproduce_seeds(table, data, budget: str = "quick", out="runs", *, seeds: int = 2,
-                    **options) -> dict:
-    """:func:`run_table` with ``seeds`` training seeds per row (``ROW/seed-S/``)."""
-    return run_table(table, data, budget, out, seeds=seeds, **options)

@@ -6,6 +6,7 @@ Python: ``bsp_fast.train("lifting", "martinez", data="clips.h5", epochs=30)`` re
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import shutil
 import sys
@@ -21,7 +22,7 @@ from .runs import ENV_TMP, MARKER, RunDirectory, RunError, default_run_dir, is_t
     write_marker
 from .precision import check_precision, decide_precision, kept_precision, machine_record, \
     probe_key, run_model_key, time_steps
-from .setup import make_datamodule, make_trainer, prepare_data, rank as _rank
+from .setup import make_datamodule, make_trainer, prepare_data
 from .tasks import TASKS, get_task
 
 __all__ = ["train", "main", "TrainResult", "few_updates"]
@@ -97,56 +98,71 @@ def few_updates(cfg: dict, train_clips: int, least: int = 3) -> str | None:
             f"from; pass a smaller --batch-size (e.g. {batch}) or more --epochs")
 
 
-def _shared_tmp(cfg: dict) -> str | None:
-    """Processes the user started (torchrun, or one bsp-train per machine with NODE_RANK
-    and --num-nodes): the run directory's temporary name, the same on every rank."""
-    if "TORCHELASTIC_RUN_ID" not in os.environ and (cfg.get("num_nodes") or 1) == 1:
-        return None
-    return f".{Path(cfg['out']).name}.tmp-ddp-{os.environ.get('MASTER_PORT', '0')}"
+# The run is a plan (decided before PyTorch is imported: options, inputs, outputs and this
+# process's part in a multi-process run), an execution (model, data, precision, fit and
+# test) and a collection (metrics.json, config.yaml, curves; _finish).
+@dataclass
+class RunPlan:
+    cfg: dict  # the resolved options
+    resume: dict | None  # the run or checkpoint this one continues (resolve_config)
+    config_path: object  # --config, an input --out must never replace
+    #: a secondary DDP process: the first process's temporary run directory it writes to
+    child_tmp: Path | None = None
+    #: the temporary name every process of a user-started multi-process run shares
+    shared: str | None = None
+
+
+def _env_rank(env) -> int:
+    """This process's rank as the launchers set it (Lightning's order of keys), and its
+    machine's (NODE_RANK): > 0 for every process but the first."""
+    ranks = [env.get(k) for k in ("RANK", "LOCAL_RANK", "SLURM_PROCID", "JSM_NAMESPACE_RANK")]
+    first = next((r for r in ranks if r is not None), "0")
+    node = env.get("NODE_RANK", "0")
+    return max(int(x) if str(x).isdigit() else 0 for x in (first, node))
+
+
+def plan_run(cli: dict, config_path=None, env=None) -> RunPlan:
+    """The run's plan; ``env`` (default ``os.environ``) is read here once: the launcher's
+    ranks, and the temporary run directory a first process hands its DDP processes."""
+    env = os.environ if env is None else env
+    cfg, resume = resolve_config(cli, config_path)
+    plan = RunPlan(cfg, resume, config_path)
+    # processes the user started (torchrun, or one bsp-train per machine with NODE_RANK and
+    # --num-nodes) share a temporary name; Lightning's own DDP processes are handed theirs
+    if "TORCHELASTIC_RUN_ID" in env or (cfg.get("num_nodes") or 1) > 1:
+        plan.shared = f".{Path(cfg['out']).name}.tmp-ddp-{env.get('MASTER_PORT', '0')}"
+    rank = _env_rank(env)
+    handed = env.get(ENV_TMP) or (str(Path(cfg["out"]).absolute().with_name(plan.shared))
+                                  if plan.shared else None)
+    if handed and rank > 0:
+        plan.child_tmp = Path(handed)
+    if cfg.get("mix") is None and not Path(cfg["data"]).exists():
+        raise RunError(f"{cfg['data']}: no such dataset directory or HDF5 file")
+    if plan.child_tmp is None:  # before any work: --force never replaces an input
+        refuse_unsafe_output(cfg["out"], force=cfg["force"], inputs=_inputs(plan),
+                             in_place=resume["run_dir"] if resume is not None else None)
+    return plan
 
 
 def _train(cli: dict, config_path=None) -> TrainResult | None:
     from .stopping import signals
 
+    plan = plan_run(cli, config_path)
     with signals() as sig:  # SIGINT/SIGTERM: Interrupted, deferred to batch ends in fit
-        result = _run(cli, config_path, sig)
-    return result
+        return _execute(plan, sig)
 
 
-def _check_inputs(cfg: dict, resume, config_path) -> None:
-    """What can be refused before PyTorch is imported: missing data, an output that is or
-    holds an input (--force never replaces one)."""
-    if cfg.get("mix") is None and not Path(cfg["data"]).exists():
-        raise RunError(f"{cfg['data']}: no such dataset directory or HDF5 file")
-    if not os.environ.get(ENV_TMP):
-        in_place = resume["run_dir"] if resume is not None else None
-        refuse_unsafe_output(cfg["out"], force=cfg["force"],
-                             inputs=_inputs(cfg, resume, config_path), in_place=in_place)
-
-
-def _run(cli: dict, config_path, sig) -> TrainResult | None:
-    cfg, resume = resolve_config(cli, config_path)
-    _check_inputs(cfg, resume, config_path)
+def _model_and_data(plan: RunPlan):
+    """``(module, dm)``: the model first, so a bad --hp is refused before any data is
+    converted (the data setup draws no random number: the weights are the seed's)."""
     import lightning.pytorch as pl
     import torch
 
-    from .lifecycle import Lifecycle, epochs_note, test_checkpoint
-    from .stopping import Interrupted, OutputWriteError
-
-    from .initial import log_initial
     from .module import TASK_MODULES
 
-    shared = _shared_tmp(cfg)
-    started = max(int(os.environ.get(k, "0")) if os.environ.get(k, "").isdigit() else 0
-                  for k in ("RANK", "NODE_RANK"))  # > 0: not the first process/machine
-    if shared and started > 0 and not os.environ.get(ENV_TMP):
-        os.environ[ENV_TMP] = str(Path(cfg["out"]).absolute().with_name(shared))
-    # a DDP process Lightning started, or one the user started on another machine
-    child = bool(os.environ.get(ENV_TMP)) and max(_rank(), started) > 0
+    cfg = plan.cfg
     if cfg["threads"]:
         torch.set_num_threads(cfg["threads"])
-    # the model first: a bad --hp is refused before any data is converted (the data setup
-    # draws no random number, so the weights are those of the seed either way)
     pl.seed_everything(cfg["seed"], workers=True, verbose=False)
     try:
         module = TASK_MODULES[cfg["task"]](cfg["model"], hparams=cfg["hp"], lr=cfg["lr"],
@@ -159,101 +175,171 @@ def _run(cli: dict, config_path, sig) -> TrainResult | None:
         # later step to slower dynamic-shape kernels
         module.net.compute = torch.compile(module.net.compute, dynamic=False)
     dm = make_datamodule(cfg)
-    prepare_data(dm, convert=not child)
-    if not child and (note := few_updates(cfg, len(dm.datasets["train"]))):
+    prepare_data(dm, convert=plan.child_tmp is None)
+    if plan.child_tmp is None and (note := few_updates(cfg, len(dm.datasets["train"]))):
         print(f"bsp-train: warning: {note}", file=sys.stderr)
-    precision, why = _precision(cfg, module, dm, resume)
-    check_precision(precision, cfg["accelerator"])
-    ckpt_path = None
-    if resume is not None:
-        ckpt_path = resume["ckpt"]
-    # --epochs below the epochs a resumed run already completed: Lightning refuses to
-    # restore it (MisconfigurationException); capped there, fit returns at once instead
-    # and the run ends with the epochs it has (lifecycle.epochs_note)
+    return module, dm
+
+
+def _epoch_floor(resume) -> int | None:
+    """--epochs below the epochs a resumed run already completed: Lightning refuses to
+    restore it (MisconfigurationException); capped there, fit returns at once instead and
+    the run ends with the epochs it has (lifecycle.epochs_note)."""
     saved = resume.get("epoch") if resume is not None else None
-    floor = saved if isinstance(saved, int) and saved > cfg["epochs"] else None
-    if child:
-        tmp = Path(os.environ[ENV_TMP])
-        life = Lifecycle(tmp, C.parse_duration(cfg["checkpoint_every"]), sig)
-        trainer = make_trainer(cfg, tmp, precision, callbacks=[life], max_epochs=floor)
-        if resume is not None and resume["run_dir"] is not None:
-            ckpt_path = tmp / "checkpoints" / "last.ckpt"
-        trainer.fit(module, datamodule=dm, ckpt_path=ckpt_path)
-        test_checkpoint(trainer, module, dm, tmp)  # the same checkpoint as the first process
-        return None
+    return saved if isinstance(saved, int) else None
+
+
+def _execute(plan: RunPlan, sig) -> TrainResult | None:
+    """Model, data and precision (decided once, here, and recorded in config.yaml), then
+    the fit and test of a secondary DDP process (None) or of the first one (its result)."""
+    module, dm = _model_and_data(plan)
+    precision, why = _precision(plan.cfg, module, dm, plan.resume)
+    check_precision(precision, plan.cfg["accelerator"])
+    saved = _epoch_floor(plan.resume)
+    floor = saved if saved is not None and saved > plan.cfg["epochs"] else None
+    if plan.child_tmp is None:
+        return _first_process(plan, sig, module, dm, (precision, why), floor)
+    from .lifecycle import Lifecycle, test_checkpoint
+
+    tmp = plan.child_tmp
+    life = Lifecycle(tmp, C.parse_duration(plan.cfg["checkpoint_every"]), sig)
+    trainer = make_trainer(plan.cfg, tmp, precision, callbacks=[life], max_epochs=floor)
+    ckpt_path = plan.resume["ckpt"] if plan.resume is not None else None
+    if plan.resume is not None and plan.resume["run_dir"] is not None:
+        ckpt_path = tmp / "checkpoints" / "last.ckpt"
+    trainer.fit(module, datamodule=dm, ckpt_path=ckpt_path)
+    test_checkpoint(trainer, module, dm, tmp)  # the same checkpoint as the first process
+    return None
+
+
+def _first_process(plan: RunPlan, sig, module, dm, precision: tuple, floor):
+    """The first process: the run directory, written under a temporary name and published
+    when complete; an interrupted or failed run is left incomplete, to be resumed."""
+    cfg, resume = plan.cfg, plan.resume
     final = Path(cfg["out"])
     copy_from = resume["run_dir"] if resume is not None else None
-    refuse_unsafe_output(final, force=cfg["force"], inputs=_inputs(cfg, resume, config_path),
+    refuse_unsafe_output(final, force=cfg["force"], inputs=_inputs(plan),
                          in_place=copy_from)  # again: the output may have appeared meanwhile
-    run = RunDirectory(final, force=cfg["force"], copy_from=copy_from, tmp_name=shared)
+    run = RunDirectory(final, force=cfg["force"], copy_from=copy_from, tmp_name=plan.shared)
     with run as tmp:
-        t_start = time.time()
         previous = read_marker(tmp)  # an incomplete run being continued
         life_marker = {"out": str(final.absolute()), "pid": os.getpid()}
         write_marker(tmp, **life_marker, state="running", epoch=None, step=None,
                      **({"fit_done": previous["fit_done"]}
                         if previous and previous.get("fit_done") else {}))
         # now: an interrupted run can be resumed
-        _write_config(cfg, tmp, precision, precision_reason=why)
-        if copy_from is not None:
-            ckpt_path = tmp / "checkpoints" / "last.ckpt"
-        life = Lifecycle(tmp, C.parse_duration(cfg["checkpoint_every"]), sig, life_marker)
-        # a run stopped after its training ended (while testing or writing metrics):
-        # its last epoch again as the cap, so fit restores the callbacks and returns
-        done = previous.get("fit_done") if previous else None
-        trainer = make_trainer(cfg, tmp, precision, callbacks=[life],
+        _write_config(cfg, tmp, precision[0], precision_reason=precision[1])
+        ckpt_path = tmp / "checkpoints" / "last.ckpt" if copy_from is not None else (
+            resume["ckpt"] if resume is not None else None)
+        job = _Job(plan, sig, module, dm, tmp, final, precision, life_marker, previous)
+        return job.fit_and_test(run, ckpt_path, floor, copy_from)
+
+
+@dataclass
+class _Job:
+    """The first process's fit, test and collection in its temporary run directory."""
+    plan: RunPlan
+    sig: object  # the signals' state (stopping.signals)
+    module: object
+    dm: object
+    tmp: Path
+    final: Path
+    precision: tuple  # (precision, why), as config.yaml records it
+    life_marker: dict
+    previous: dict | None  # the marker of an incomplete run being continued
+
+    def fit_and_test(self, run, ckpt_path, floor, copy_from) -> TrainResult:
+        import lightning.pytorch as pl
+
+        from .initial import log_initial
+        from .lifecycle import Lifecycle
+        from .stopping import Interrupted, OutputWriteError
+
+        cfg, t_start = self.plan.cfg, time.time()
+        life = Lifecycle(self.tmp, C.parse_duration(cfg["checkpoint_every"]), self.sig,
+                         self.life_marker)
+        # a run stopped after its training ended (while testing or writing metrics): its
+        # last epoch again as the cap, so fit restores the callbacks and returns
+        done = self.previous.get("fit_done") if self.previous else None
+        trainer = make_trainer(cfg, self.tmp, self.precision[0], callbacks=[life],
                                max_epochs=done or floor)
-        if not cfg["quiet"]:
-            n = {s: len(d) for s, d in dm.datasets.items()}
-            print(f"bsp-train: {cfg['task']} / {cfg['model']}, {trainer.accelerator.__class__.__name__.replace('Accelerator', '').lower()} "
-                  f"x {trainer.world_size}, precision {precision}; {n.get('train')} train, "
-                  f"{n.get('val')} val, {n.get('test')} test clips of {dm.h5_path} -> {final}")
-        seconds = {}
+        self._announce(trainer)
         t0 = time.perf_counter()
         finished = read_run(copy_from)["metrics"] if copy_from is not None else None
-        if finished and finished.get("initial"):
-            initial = finished["initial"]
-        else:
-            initial = _initial(cfg, dm, module.net)
-        seconds["initial"] = time.perf_counter() - t0
+        initial = finished["initial"] if finished and finished.get("initial") else \
+            _initial(cfg, self.dm, self.module.net)
+        seconds = {"initial": time.perf_counter() - t0}
         log_initial(trainer, initial, cfg["quiet"])
         pl.seed_everything(cfg["seed"], workers=True, verbose=False)
-        os.environ[ENV_TMP] = str(tmp)
         try:
-            life.start_clock()
-            trainer.fit(module, datamodule=dm, ckpt_path=ckpt_path, weights_only=True)
-            if sig.received is not None:  # during the last validation: stop before testing
-                raise Interrupted(sig.received)
-            # wall and CPU (this process's threads), over every process of a resumed run
-            seconds["fit"], seconds["fit_cpu"] = life.fit_seconds()
-            seconds.update({"partial": True} if life.partial else {"carried": True})
-            write_marker(tmp, **life_marker, state="running", fit_done=trainer.current_epoch,
-                         epoch=trainer.current_epoch, step=trainer.global_step)
-            cfg = epochs_note(cfg, trainer, trained=life.trained or bool(done))
-            t0 = time.perf_counter()
-            tested = test_checkpoint(trainer, module, dm, tmp)
-            seconds["test"] = time.perf_counter() - t0
-            if tested == "last":
-                print("bsp-train: note: no validation ran in this run (it ended before its "
-                      "first epoch's validation), so there is no best checkpoint: validated "
-                      "and tested the last one (checkpoints/last.ckpt, also saved as best.ckpt)",
-                      file=sys.stderr)
-            result = _finish(cfg, tmp, final, trainer, initial, precision, seconds, tested,
-                             precision_reason=why)
+            with _handed_to_ddp_processes(self.tmp):
+                return self._fit(trainer, life, ckpt_path, done, initial, seconds)
         except (Interrupted, OutputWriteError) as exc:
-            last = tmp / "checkpoints" / "last.ckpt"
-            if last.is_file() and last.stat().st_mtime >= t_start:
-                run.keep_incomplete = True  # something to continue from
-                marker = read_marker(tmp) or {}
-                marker.update(life_marker, state="interrupted" if isinstance(
-                    exc, Interrupted) else "failed", reason=str(exc))
-                marker.pop("updated", None)
-                write_marker(tmp, **marker)
-            exc.run = run  # main() says where the run was left
+            self._leave_incomplete(run, exc, t_start)
             raise
-        finally:
-            os.environ.pop(ENV_TMP, None)
-    return result
+
+    def _announce(self, trainer) -> None:
+        cfg = self.plan.cfg
+        if cfg["quiet"]:
+            return
+        n = {s: len(d) for s, d in self.dm.datasets.items()}
+        device = trainer.accelerator.__class__.__name__.replace("Accelerator", "").lower()
+        print(f"bsp-train: {cfg['task']} / {cfg['model']}, {device} x {trainer.world_size}, "
+              f"precision {self.precision[0]}; {n.get('train')} train, {n.get('val')} val, "
+              f"{n.get('test')} test clips of {self.dm.h5_path} -> {self.final}")
+
+    def _fit(self, trainer, life, ckpt_path, done, initial, seconds) -> TrainResult:
+        from .lifecycle import epochs_note, test_checkpoint
+        from .stopping import Interrupted
+
+        life.start_clock()
+        trainer.fit(self.module, datamodule=self.dm, ckpt_path=ckpt_path, weights_only=True)
+        if self.sig.received is not None:  # during the last validation: stop before testing
+            raise Interrupted(self.sig.received)
+        # wall and CPU (this process's threads), over every process of a resumed run
+        seconds["fit"], seconds["fit_cpu"] = life.fit_seconds()
+        seconds.update({"partial": True} if life.partial else {"carried": True})
+        write_marker(self.tmp, **self.life_marker, state="running",
+                     fit_done=trainer.current_epoch, epoch=trainer.current_epoch,
+                     step=trainer.global_step)
+        cfg = epochs_note(self.plan.cfg, trainer, trained=life.trained or bool(done))
+        t0 = time.perf_counter()
+        tested = test_checkpoint(trainer, self.module, self.dm, self.tmp)
+        seconds["test"] = time.perf_counter() - t0
+        if tested == "last":
+            print("bsp-train: note: no validation ran in this run (it ended before its "
+                  "first epoch's validation), so there is no best checkpoint: validated "
+                  "and tested the last one (checkpoints/last.ckpt, also saved as best.ckpt)",
+                  file=sys.stderr)
+        return _finish(cfg, self.tmp, self.final, trainer, initial, self.precision[0],
+                       seconds, tested, precision_reason=self.precision[1])
+
+    def _leave_incomplete(self, run, exc, t_start: float) -> None:
+        """Something to continue from (a last.ckpt of this process): the run stays as an
+        incomplete run directory, its marker saying why; main() says where."""
+        from .stopping import Interrupted
+
+        last = self.tmp / "checkpoints" / "last.ckpt"
+        if last.is_file() and last.stat().st_mtime >= t_start:
+            run.keep_incomplete = True
+            marker = read_marker(self.tmp) or {}
+            marker.update(self.life_marker, state="interrupted" if isinstance(
+                exc, Interrupted) else "failed", reason=str(exc))
+            marker.pop("updated", None)
+            write_marker(self.tmp, **marker)
+        exc.run = run
+
+
+@contextlib.contextmanager
+def _handed_to_ddp_processes(tmp: Path):
+    """Lightning starts its DDP processes by running this command again, so the
+    environment is the one channel to them: the temporary run directory is handed over
+    there while fit and test run (plan_run reads it)."""
+    os.environ[ENV_TMP] = str(tmp)
+    try:
+        yield
+    finally:
+        os.environ.pop(ENV_TMP, None)
 
 
 def _precision(cfg: dict, module, dm, resume=None) -> tuple:
@@ -280,10 +366,11 @@ def _precision(cfg: dict, module, dm, resume=None) -> tuple:
                             key=probe_key(key, torch.get_num_threads(), device))
 
 
-def _inputs(cfg: dict, resume, config_path=None) -> list:
+def _inputs(plan: RunPlan) -> list:
     """What a run reads and ``--out`` must never replace: the data (folder, data.csv or
     HDF5 file), a mix's clip files, the --config file and the checkpoint it starts from."""
-    return [cfg.get("data"), *(cfg.get("mix_data") or {}).values(), config_path,
+    cfg, resume = plan.cfg, plan.resume
+    return [cfg.get("data"), *(cfg.get("mix_data") or {}).values(), plan.config_path,
             resume["ckpt"] if resume is not None and resume["run_dir"] is None else None]
 
 
