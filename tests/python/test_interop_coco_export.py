@@ -107,3 +107,69 @@ def test_write_images_without_media_is_one_clear_error(tmp_path, capsys):
     rc = main(["export", "coco", str(path), str(tmp_path / "b.json"), "--write-images",
                str(tmp_path)])
     assert rc == 2
+
+
+def test_area_and_segmentation_from_the_masks(tmp_path, clips):
+    """A clip file with media: each annotation's segmentation is the pedestrian's pixels
+    of its crop (mask tag 4) put back in the image, as RLE that pycocotools decodes, and
+    its area that of the segmentation; the crop's own pixels agree."""
+    mask_utils = pytest.importorskip("pycocotools.mask")
+    import h5py
+
+    export_coco(clips, tmp_path / "a.json")
+    doc = json.loads((tmp_path / "a.json").read_text())
+    images = {im["id"]: im for im in doc["images"]}
+    with h5py.File(clips, "r") as f:
+        g = f["train"]
+        box = g["frames/crop_box"][0].astype(int)
+        crop = g["frames/mask"][0] == 4
+        video = g["meta/video_id"].asstr()[0]
+        track, frame = g["meta/pedestrian_id"].asstr()[0], int(g["frames/frame_idx"][0])
+    a = next(a for a in doc["annotations"]
+             if images[a["image_id"]]["video"] == video and images[a["image_id"]]["frame"]
+             == frame and a.get("track_name", str(a["track_id"])) == track)
+    im = images[a["image_id"]]
+    rle = mask_utils.frPyObjects(a["segmentation"], im["height"], im["width"])
+    m = mask_utils.decode(rle)
+    assert m.shape == (im["height"], im["width"]) and a["area"] == float(m.sum()) > 0
+    assert float(mask_utils.area(rle)) == a["area"]
+    u0, v0, u1, v1 = box
+    assert not m[:max(v0, 0)].any() and not m[:, :max(u0, 0)].any()  # inside the crop box
+    scale = ((min(v1, im["height"]) - max(v0, 0)) * (min(u1, im["width"]) - max(u0, 0))
+             / crop.size)
+    assert a["area"] == pytest.approx(crop.sum() * scale, rel=0.15)
+
+
+def test_round_trip_keeps_split_and_labels(tmp_path):
+    """export coco then import coco: each video in the split it came from, each frame's
+    crossing label back without --labels."""
+    import h5py
+
+    path = tmp_path / "c.h5"
+    write_clip_file(path, clips=(8, 4, 4), clip_length=8)
+    with h5py.File(path, "r+") as f:  # one split per video, as bsp-convert splits
+        for s in ("train", "val", "test"):
+            v = [f"{s}_{x}" for x in f[s]["meta/video_id"].asstr()[()]]
+            del f[s]["meta/video_id"]
+            f[s].create_dataset("meta/video_id", data=v, dtype=h5py.string_dtype())
+    assert main(["export", "coco", str(path), str(tmp_path / "a.json"), "--quiet"]) == 0
+    assert main(["import", "coco", str(tmp_path / "a.json"), str(tmp_path / "b.h5"),
+                 "--clip-length", "8", "--quiet"]) == 0
+
+    def frames(p):
+        out = {}
+        with h5py.File(p, "r") as f:
+            for s in ("train", "val", "test"):
+                g = f[s]
+                for v, t, fr, c in zip(g["meta/video_id"].asstr()[()],
+                                       g["meta/pedestrian_id"].asstr()[()],
+                                       g["targets/frame_idx"][()], g["targets/is_crossing"][()]):
+                    out.update({(s, v, t, int(a)): int(b) for a, b in zip(fr, c)})
+            return out, f.attrs.get("labels_source"), json.loads(f.attrs.get("settings_json",
+                                                                              "{}"))
+    src, _, _ = frames(path)
+    back, labels, settings = frames(tmp_path / "b.h5")
+    assert labels == "records" and settings["split_rule"] == "source"
+    assert back and set(back) <= set(src)
+    assert {k: src[k] for k in back} == back and any(back.values())
+    assert {k[:2] for k in back} == {k[:2] for k in src}  # every video, in its split

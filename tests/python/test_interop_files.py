@@ -80,7 +80,7 @@ def test_openpose_import_maps_thresholds_and_labels(tmp_path):
 def test_untracked_people_need_a_tracker_or_best(tmp_path):
     op = tmp_path / "op"
     write_openpose(op, "v", range(4), lambda f: [(-1, body25(f)),
-                                                 (-1, body25(f, shift=9, low=["Nose"]))])
+                                                 (-1, body25(f, shift=150, low=["Nose"]))])
     with pytest.raises(I.BadInput, match=r"v_000000000000_keypoints.json: people\[0\]: 2 people "
                                          r"without person_id in this frame; run OpenPose with "
                                          r"--tracking 1"):

@@ -245,6 +245,12 @@ def _run(a) -> str:
              + ", ".join(_split_counts(s, n, r["class_counts"][s])
                          for s, n in r["clips"].items()),
              f"CARLA joints filled: {len(r['joints'])} of 26"]
+    if r["settings"]["labels"] == "records":
+        lines.append("labels: the records' own crossing values (as export coco writes them)")
+    if r["settings"]["split_rule"] == "source":
+        lines.append("split: kept from the images' split (as export coco writes it)")
+    elif (r.get("frames") or {}).get("split_note"):
+        lines.append(f"split: {r['frames']['split_note']}")
     lines += [f"  skipped {s}" for s in r["skipped"]]
     lines += _frame_lines(r.get("frames") or {})
     lines += [f"WARNING: {w}" for w in r["warnings"]]

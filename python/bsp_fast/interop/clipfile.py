@@ -24,6 +24,7 @@ from .readers import BadInput, Detections, option, read_coco, read_labels, read_
 __all__ = ["clip_settings", "write_clip_file", "map_joints", "import_coco", "import_openpose"]  # clip_settings: the converter's own
 
 _STR_META = ("video_id", "pedestrian_id", "age", "gender", "model", "map")
+SPLITS = ("train", "val", "test")
 
 
 def _codes(names: list) -> tuple:
@@ -79,8 +80,38 @@ def map_joints(joints: str, points, scores, threshold: float, derive: bool) -> t
     return m, uv, visible, conf, at_origin
 
 
+def _fixed_plan(plan_for, st: dict, eval_stride: int, row_split: list) -> dict:
+    """The planner's clips with each recording in its video's given split (``row_split``
+    per row: a round trip keeps the split it came with): the train recordings'
+    clips as planned with the train stride, the others' with the eval stride, from
+    whichever split the planner put them in; the train split balanced as the planner
+    balances (the first clips of each class, as many as the rarer class has)."""
+    plans = {"train": plan_for(st["clip_offset"], st["clip_offset"], False)}
+    plans["val"] = plans["test"] = (plans["train"] if eval_stride == st["clip_offset"]
+                                    else plan_for(eval_stride, eval_stride, False))
+    rec_rows = plans["train"]["recording_rows"]
+    out = {k: plans["train"][k] for k in ("recording_rows", "skipped",
+                                          "clips_rejected_out_of_image")}
+    keys = ("recording", "first", "segment", "index", "label", "time_to_event")
+    for s in SPLITS:
+        mine = lambda r: row_split[rec_rows[r][0]] == s  # noqa: E731
+        parts = [plans[s][t] for t in SPLITS]
+        take = [np.array([mine(r) for r in p["recording"]], bool) for p in parts]
+        out[s] = {k: np.concatenate([np.asarray(p[k])[m] for p, m in zip(parts, take)])
+                  for k in keys}
+        out[s]["recordings"] = sorted(r for p in parts for r in p["recordings"] if mine(r))
+    if st["balance"]:
+        lab = out["train"]["label"]
+        keep = min(int((lab == 0).sum()), int((lab == 1).sum()))
+        rank = np.array([(lab[:i] == lab[i]).sum() for i in range(len(lab))], np.int64)
+        out["train"] = dict({k: v[rank < keep] for k, v in out["train"].items()
+                             if k != "recordings"}, recordings=out["train"]["recordings"])
+    return out
+
+
 def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3,
                     derive: bool = True, skip_short: bool = False, force: bool = False,
+                    splits: dict | None = None, labels_source: str | None = None,
                     **clip_options) -> dict:
     """Writes the clips of ``det`` to ``out`` (HDF5, docs/interop.md) and returns a report.
 
@@ -88,7 +119,9 @@ def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3
     every label is 0 (autoencoder data). ``threshold``: minimum confidence of a visible
     joint. ``derive``: the skeleton map's standard derivations (hips, neck from COCO).
     A track whose longest run of consecutive frames is shorter than a clip is an error
-    unless ``skip_short`` (then it is left out and listed). ``clip_options``: those of
+    unless ``skip_short`` (then it is left out and listed). ``splits``: ``{video:
+    split}`` to keep (:func:`_fixed_plan`) instead of the seeded split; ``labels_source``
+    names where ``labels`` came from (default ``csv``). ``clip_options``: those of
     :func:`clip_settings`. Nothing is left behind on error."""
     if not isinstance(threshold, (int, float)) or not 0 <= threshold <= 1e6:
         raise ValueError(f"threshold must be a number >= 0, got {threshold!r}")
@@ -119,15 +152,17 @@ def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3
     rows = dict(video=vcode[order], track=tcode[order], frame=det.frame[order],
                 width=det.width[order], height=det.height[order], crossing=crossing,
                 uv=uv, visible=visible, confidence=conf)
-    plan = _core.plan_clips(
+    plan_for = lambda stride, eval_stride, balance: _core.plan_clips(  # noqa: E731
         rows["video"].astype(np.int32), np.zeros(len(order), np.int64), rows["track"],
         rows["frame"], crossing, uv, rows["width"], rows["height"],
-        clip_length=L, clip_stride=st["clip_offset"],
-        eval_clip_stride=clip_options.get("eval_clip_offset") or 0,
+        clip_length=L, clip_stride=stride, eval_clip_stride=eval_stride,
         min_video_length=clip_options.get("min_video_length") or 0,
         label_fraction=st["label_fraction"], benchmark=st["benchmark"],
         val_frac=float(st["val_frac"]), test_frac=float(st["test_frac"]), seed=st["seed"],
-        balance=st["balance"])
+        balance=balance)
+    eval_stride = clip_options.get("eval_clip_offset") or st["clip_offset"]
+    plan = (plan_for(st["clip_offset"], eval_stride, st["balance"]) if splits is None else
+            _fixed_plan(plan_for, st, eval_stride, [splits[videos[v]] for v in rows["video"]]))
     clips = {s: int(len(plan[s]["first"])) for s in ("train", "val", "test")}
     if sum(clips.values()) == 0:
         reasons = "; ".join(f"{r}" for _, r in plan["skipped"][:3])
@@ -145,7 +180,9 @@ def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3
                   frames=dict(det.notes),
                   settings=dict(st, source=det.source, source_joints=det.joints,
                                 threshold=float(threshold), derive=bool(derive),
-                                labels="csv" if labels is not None else "none"))
+                                labels=labels_source or ("csv" if labels is not None
+                                                         else "none"),
+                                split_rule="source" if splits else "seeded by video"))
     with atomic_output(out, force=force) as tmp:
         _write(tmp, plan, rows, names, st, report, m)
     report["output"] = str(out)
@@ -226,10 +263,14 @@ def _write(path, plan: dict, rows: dict, names: dict, st: dict, report: dict, m)
 
 def import_coco(path, out, *, images=None, labels=None, image_size=None, tracks="require",
                 joints="coco17", **options) -> dict:
-    """:func:`read_coco` then :func:`write_clip_file` (``labels``: a labels CSV path)."""
+    """:func:`read_coco` then :func:`write_clip_file` (``labels``: a labels CSV path;
+    without it, the records' own ``crossing`` where every record has one, as our COCO
+    export writes them; the images' ``split``, where every image names one, is kept)."""
     det = read_coco(path, images=images, image_size=image_size, tracks=tracks, joints=joints)
-    return write_clip_file(det, out, labels=None if labels is None else read_labels(labels),
-                           **options)
+    return write_clip_file(det, out, labels=det.labels if labels is None else read_labels(labels),
+                           splits=det.splits, **options,
+                           labels_source="csv" if labels is not None else
+                           "records" if det.labels is not None else None)
 
 
 def import_openpose(folder, out, *, image_size, labels=None, tracks="require",

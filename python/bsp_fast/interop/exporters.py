@@ -91,6 +91,8 @@ def read_clips(h5_path, split: str = "all", frame_3d: str | None = None) -> dict
                      height=g["meta/clip_height"][()])
             if "clip_frames" in g and "frames/rgb" in g:
                 d["clip_frames"] = g["clip_frames"][()]
+            if "targets/is_crossing" in g:
+                d["crossing"] = g["targets/is_crossing"][()]
             if frame_3d is not None:
                 d["xyz"] = _points_3d(g, frame_3d, h5_path)
             if frame_3d == "ground":
@@ -360,16 +362,18 @@ def _save_all(targets: list, force: bool) -> None:
 
 def _frames(data: dict) -> tuple:
     """Unique (video, track, frame) rows across clips and splits, with their points, the
-    image size and where the media crop is (``(split, frame-table row)`` or None)."""
+    image size, where the media crop is (``(split, frame-table row)`` or None), the split
+    and the frame's crossing label (None where the file has none)."""
     rows = {}
     for s, c in data.items():
-        media = c.get("clip_frames")
+        media, crossing = c.get("clip_frames"), c.get("crossing")
         for i in range(len(c["uv"])):
             for k in range(c["uv"].shape[1]):
                 key = (c["video"][i], c["track"][i], int(c["frames"][i, k]))
                 rows.setdefault(key, (c["uv"][i, k], c["present"][i, k], int(c["width"][i]),
                                       int(c["height"][i]),
-                                      None if media is None else (s, int(media[i, k]))))
+                                      None if media is None else (s, int(media[i, k])), s,
+                                      None if crossing is None else int(crossing[i, k])))
     keys = sorted(rows)
     return keys, [rows[k] for k in keys]
 
@@ -423,6 +427,12 @@ def export_coco(h5_path, out, *, kind: str = "annotations", images_out=None,
                      np.stack([r[1] for r in rows]), fill=0.0)
     track_ids = _track_ids(keys)
     named = any(str(v) != t for (_, t), v in track_ids.items())
+    masks = _Masks(h5_path) if kind == "annotations" and any(r[4] for r in rows) else None
+    in_splits: dict = {}
+    for s, c in data.items():
+        for v in c["video"]:
+            in_splits.setdefault(v, set()).add(s)
+    one_split = all(len(v) == 1 for v in in_splits.values())
     image_ids: dict = {}
     images, records = [], []
     for n, ((video, track, frame), row) in enumerate(zip(keys, rows)):
@@ -431,6 +441,8 @@ def export_coco(h5_path, out, *, kind: str = "annotations", images_out=None,
             images.append({"id": len(images) + 1, "file_name": _image_name(video, frame),
                            "width": row[2], "height": row[3], "video": video, "frame": frame,
                            "license": 1})
+            if one_split:  # import coco keeps it
+                images[-1]["split"] = row[5]
         keypoints = []
         for (x, y), present in zip(uv[n], ok[n]):  # v = 2 (visible) / score 1.0, or 0, 0, 0
             flag = (2 if kind == "annotations" else 1.0) if present else 0
@@ -439,8 +451,12 @@ def export_coco(h5_path, out, *, kind: str = "annotations", images_out=None,
                "keypoints": keypoints, "track_id": track_ids[(video, track)]}
         if named:
             rec["track_name"] = track
+        if row[6] is not None:  # the frame's label: import coco reads it back
+            rec["crossing"] = row[6]
         if kind == "annotations":
             rec.update(_box(uv[n], ok[n]), id=n + 1, iscrowd=0, num_keypoints=int(ok[n].sum()))
+            if masks is not None and row[4] is not None:
+                rec.update(masks.segment(row[4], row[2], row[3]))
         else:
             rec["score"] = 1.0
         records.append(rec)
@@ -463,12 +479,64 @@ def export_coco(h5_path, out, *, kind: str = "annotations", images_out=None,
         targets = [(out, dict(images_doc, annotations=records), _save_json)]
     else:
         targets = [(out, records, _save_json), (images_out, images_doc, _save_json)]
+    if masks is not None:
+        masks.close()
     if images_dir is not None:
         targets.append((images_dir, (h5_path, images, keys, rows), _save_images, True))
     _save_all(targets, force)
     return {"images": len(images), "records": len(records), "joints": dst.name,
             "present": [n for n, p in zip(dst.joints, m.present) if p],
             "images_written": len(images) if images_dir is not None else 0}
+
+
+class _Masks:
+    """COCO ``segmentation`` and ``area`` of a frame from the clip file's media: the
+    pedestrian's pixels (``frames/mask`` == 4) of its crop, scaled back to the crop box
+    (nearest neighbour) in the whole image, as an uncompressed RLE (column-major runs,
+    zeros first: pycocotools' ``frPyObjects`` reads it); the area is the segmentation's
+    (COCO's rule), at the crop's resolution."""
+
+    def __init__(self, h5_path):
+        import h5py
+
+        self.f = h5py.File(h5_path, "r")
+
+    def close(self) -> None:
+        self.f.close()
+
+    def segment(self, where, W: int, H: int) -> dict:
+        split, r = where
+        g = self.f[split]
+        box = g["frames/crop_box"][r].astype(np.float64)
+        if "frames/mask" not in g or not np.all(np.isfinite(box)):
+            return {"segmentation": _rle(np.zeros((H, 0), bool), H, W, 0), "area": 0.0}
+        u0, v0, u1, v1 = (int(round(x)) for x in box)
+        crop = g["frames/mask"][r] == 4
+        S = crop.shape[0]
+        rows = (np.arange(max(v0, 0), min(v1, H)) - v0) * S // max(v1 - v0, 1)
+        cols = (np.arange(max(u0, 0), min(u1, W)) - u0) * S // max(u1 - u0, 1)
+        block = np.zeros((H, len(cols)), bool)
+        block[max(v0, 0):max(v0, 0) + len(rows)] = crop[np.ix_(rows, cols)]
+        return {"segmentation": _rle(block, H, W, max(u0, 0)), "area": float(block.sum())}
+
+
+def _rle(block: np.ndarray, H: int, W: int, col0: int) -> dict:
+    """COCO's uncompressed RLE of an ``H x W`` image that is 0 but for ``block (H, c)``
+    at columns ``col0 .. col0 + c - 1``."""
+    flat = block.ravel(order="F").astype(np.int8)
+    before, after = col0 * H, (W - col0 - block.shape[1]) * H
+    if flat.size == 0:
+        return {"counts": [H * W], "size": [H, W]}
+    bounds = np.concatenate([[0], np.flatnonzero(np.diff(flat)) + 1, [flat.size]])
+    runs = np.diff(bounds).tolist()
+    if flat[0]:
+        runs.insert(0, 0)
+    runs[0] += before
+    if flat[-1]:
+        runs.append(after)
+    else:
+        runs[-1] += after
+    return {"counts": [int(n) for n in runs], "size": [int(H), int(W)]}
 
 
 def _save_images(folder, payload) -> None:

@@ -65,6 +65,11 @@ class Detections:
     where: list
     source: str
     notes: dict = field(default_factory=dict)
+    #: ``{(video, track, frame): crossing}`` where every record carries one (our COCO
+    #: export writes each frame's label), else None
+    labels: dict | None = None
+    #: ``{video: split}`` where every image names one (our COCO export), else None
+    splits: dict | None = None
 
 
 def load_json(path):
@@ -135,8 +140,23 @@ def _image_table(doc, path: Path, default_size) -> dict:
             size = default_size
         if im["id"] in table:
             raise BadInput(f"{where}: image id {im['id']!r} appears twice")
-        table[im["id"]] = (str(video), int(frame), int(size[0]), int(size[1]))
+        table[im["id"]] = (str(video), int(frame), int(size[0]), int(size[1]),
+                           im.get("split"))
     return table
+
+
+def _source_splits(table: dict) -> tuple:
+    """``({video: split} or None, note)``: the split every image names (our COCO export
+    writes the clip file's), one per video; None where an image names none or a video
+    has two."""
+    splits, note = {}, ""
+    for video, _, _, _, split in table.values():
+        if split not in ("train", "val", "test"):
+            return None, ""
+        if splits.setdefault(video, split) != split:
+            return None, (f"video {video!r} has images in the {splits[video]} and {split} "
+                          "splits: the split is seeded instead")
+    return splits, note
 
 
 def read_coco(path, images=None, image_size=None, tracks: str = "require",
@@ -178,8 +198,8 @@ def read_coco(path, images=None, image_size=None, tracks: str = "require",
         raise BadInput(f"{path}: 'annotations' must be a list")
     jset = joint_set(joints)
     J = len(jset)
-    table_size = {(v, f): (w, h) for v, f, w, h in table.values()}
-    rows = []
+    table_size = {(v, f): (w, h) for v, f, w, h, _ in table.values()}
+    rows, crossing = [], {}
     for k, rec in enumerate(records):
         where = f"{path}: record {k}"
         try:
@@ -200,13 +220,21 @@ def read_coco(path, images=None, image_size=None, tracks: str = "require",
         track = rec.get("track_name", rec.get("track_id"))  # our exporter: both
         rows.append((rec["image_id"], None if track is None else str(track), kp[:, :2], conf,
                      score, f"{where} (image_id {rec['image_id']!r})"))
+        crossing[rows[-1][5]] = rec.get("crossing")
     frames = {}
     for video, frame, *_ in table.values():
         frames.setdefault(video, set()).add(frame)
     rows = [((*table[r[0]][:2],),) + r[1:] for r in rows]
     rows, notes = _assign_untracked(rows, tracks, frames, _COCO_WORDS)
     out = [(*r[0], r[1], r[2], r[3], *table_size[r[0]], r[5]) for r in rows]
-    return _detections(jset.name, out, str(path), notes)
+    det = _detections(jset.name, out, str(path), notes)
+    if crossing and all(v in (0, 1) for v in crossing.values()):
+        det.labels = {(v, t, int(f)): crossing[w]
+                      for v, t, f, w in zip(det.video, det.track, det.frame, det.where)}
+    det.splits, note = _source_splits(table)
+    if note:
+        det.notes["split_note"] = note
+    return det
 
 
 _COCO_WORDS = dict(
