@@ -100,6 +100,15 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--image-size", type=_size, metavar="WxH", required=True)
     _import_common(o)
     _benchmark_parsers(imp)
+    _export_parsers(sub)
+    j = sub.add_parser("joints", help="which CARLA joint each joint set fills (markdown)")
+    j.add_argument("--no-derive", action="store_true")
+    p.epilog = "joint sets: " + ", ".join(JOINT_SETS)
+    return p
+
+
+def _export_parsers(sub) -> None:
+    """``export videopose3d`` and ``export coco`` (bsp_fast.interop.exporters)."""
     exp = sub.add_parser("export", help="clip file -> other formats").add_subparsers(
         dest="format", required=True)
     v = exp.add_parser("videopose3d", help="VideoPose3D data_2d_custom_NAME.npz "
@@ -116,7 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--viewer", action="store_true",
                    help="what VideoPose3D's render draws as it is: every subject starts at "
                    "its video's frame 0 (the first pose held before it; render with "
-                   "--viz-video VIDEO --viz-skip START_FRAME) and the 3D in the ground frame")
+                   "--viz-video VIDEO --viz-skip START_FRAME --viz-limit END_FRAME) and the 3D "
+                   "in the ground frame")
     v.add_argument("--joints", default="coco17",
                    help="2D joint set (default coco17, what VideoPose3D's in-the-wild models "
                         "take; h36m17)")
@@ -137,10 +147,6 @@ def build_parser() -> argparse.ArgumentParser:
         q.add_argument("--no-derive", action="store_true", help="no mid-point derivations")
         q.add_argument("--force", action="store_true", help="replace existing outputs")
         q.add_argument("--quiet", action="store_true")
-    j = sub.add_parser("joints", help="which CARLA joint each joint set fills (markdown)")
-    j.add_argument("--no-derive", action="store_true")
-    p.epilog = "joint sets: " + ", ".join(JOINT_SETS)
-    return p
 
 
 def _refuse_existing(a) -> None:
