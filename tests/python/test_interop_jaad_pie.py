@@ -303,6 +303,27 @@ def test_errors_name_the_file_and_write_nothing(tmp_path, capsys):
     assert not marker.exists()
 
 
+def test_pie_refuses_what_pie_data_refuses(tmp_path, capsys):
+    """An attribute value pie_data.py does not map, a crossing point that is not one of
+    the pedestrian's frames inside the image: one line each, exit 1, as the official
+    code stops (KeyError, ValueError) instead of importing without them."""
+    root = _pie(tmp_path / "pie")
+    out = tmp_path / "x.h5"
+    argv = ["import", "pie", str(root), str(out), "--poses", str(root / "poses")]
+    xml = root / "annotations" / "set03" / "video_0001_annt.xml"
+    good = xml.read_text()
+    xml.write_text(good.replace('<attribute name="look">not-looking</attribute>',
+                                '<attribute name="look">glancing</attribute>', 1))
+    _fails(capsys, argv, out, str(xml), "pedestrian '3_1_1'", "frame 0",
+           "look: 'glancing', not one of not-looking, looking", "pie_data.py")
+    xml.write_text(good)
+    attrs = root / "annotations_attributes" / "set03" / "video_0001_attributes.xml"
+    attrs.write_text(attrs.read_text().replace('crossing_point="95"',
+                                               f'crossing_point="{FRAMES - 1}"'))
+    _fails(capsys, argv, out, str(attrs), f"crossing_point {FRAMES - 1} is not one of its "
+           "annotated frames inside the image")  # the last box is outside="1"
+
+
 def test_restricted_unpickler(tmp_path):
     data = {"video_0001": {"00001_1_1_1": np.arange(36.0), "s": np.float64(2.5)},
             "o": [np.zeros((2, 3), np.float32), (1, "a"), {1, 2}]}
