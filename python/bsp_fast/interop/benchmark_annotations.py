@@ -307,6 +307,8 @@ def import_tracks(tracks: list, out, *, dataset: str, source, sizes: dict, root,
     tte = tuple(int(v) for v in tte)
     if len(tte) != 2 or not 0 <= tte[0] <= tte[1]:
         raise ValueError(f"tte must be (min, max) with 0 <= min <= max, got {tte!r}")
+    if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or threshold < 0:
+        raise ValueError(f"threshold must be a number >= 0, got {threshold!r}")
     stride = window_stride(overlap, obs_length)
     windows, kept, short = _windows(tracks, obs_length, tte, stride, cut_gaps)
     if not windows:
