@@ -20,8 +20,8 @@ from .clipfile import clip_settings, map_joints
 from .readers import BadInput, load_json
 from .safe_pickle import RefusedPickle, load_file
 
-__all__ = ["Track", "window_stride", "import_tracks", "refuse_existing", "SPLITS",
-           "BENCHMARK"]
+__all__ = ["Track", "window_stride", "import_tracks", "check_options", "refuse_existing",
+           "SPLITS", "BENCHMARK"]
 
 #: the benchmark's defaults: observation length, time to event (frames), overlap per dataset
 BENCHMARK = dict(obs_length=16, tte=(30, 60), overlap={"jaad": 0.8, "pie": 0.6})
@@ -50,6 +50,19 @@ class Track:
     split: str | None
     where: str
     use: bool = True
+
+
+def check_options(obs_length, tte, overlap, threshold) -> tuple:
+    """The benchmark options, checked (``ValueError`` naming the allowed values) before
+    anything is read; returns ``(tte, stride)``."""
+    if isinstance(obs_length, bool) or not isinstance(obs_length, int) or obs_length < 2:
+        raise ValueError(f"obs_length must be an integer >= 2, got {obs_length!r}")
+    tte = tuple(int(v) for v in tte)
+    if len(tte) != 2 or not 0 <= tte[0] <= tte[1]:
+        raise ValueError(f"tte must be (min, max) with 0 <= min <= max, got {tte!r}")
+    if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or threshold < 0:
+        raise ValueError(f"threshold must be a number >= 0, got {threshold!r}")
+    return tte, window_stride(overlap, obs_length)
 
 
 def refuse_existing(out, force: bool) -> None:
@@ -302,14 +315,7 @@ def import_tracks(tracks: list, out, *, dataset: str, source, sizes: dict, root,
     """Cuts ``tracks`` as the benchmark does (:mod:`.benchmark_windows`), joins the poses
     of ``source`` (:class:`OpenPoseFrames` or :class:`PickledPoses`) and writes the clip
     file ``out``; returns the report."""
-    if isinstance(obs_length, bool) or not isinstance(obs_length, int) or obs_length < 2:
-        raise ValueError(f"obs_length must be an integer >= 2, got {obs_length!r}")
-    tte = tuple(int(v) for v in tte)
-    if len(tte) != 2 or not 0 <= tte[0] <= tte[1]:
-        raise ValueError(f"tte must be (min, max) with 0 <= min <= max, got {tte!r}")
-    if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or threshold < 0:
-        raise ValueError(f"threshold must be a number >= 0, got {threshold!r}")
-    stride = window_stride(overlap, obs_length)
+    tte, stride = check_options(obs_length, tte, overlap, threshold)
     windows, kept, short = _windows(tracks, obs_length, tte, stride, cut_gaps)
     if not windows:
         raise BadInput(f"{root}: no pedestrian track has the {obs_length + tte[1]} frames "

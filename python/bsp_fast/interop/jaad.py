@@ -23,7 +23,7 @@ from pathlib import Path
 from .annotation_xml import (check_values, crossing_attributes, parse_xml, track_boxes,
                              video_size)
 from .benchmark_annotations import (BENCHMARK, SPLITS, OpenPoseFrames, PickledPoses, Track,
-                                    import_tracks, refuse_existing)
+                                    check_options, import_tracks, refuse_existing)
 from .readers import BadInput
 
 __all__ = ["read_jaad", "import_jaad", "SUBSETS"]
@@ -152,6 +152,7 @@ def import_jaad(root, out, *, openpose=None, poses=None, subset: str = "beh",
     ``drop_first``: :mod:`.benchmark_windows`."""
     if (openpose is None) == (poses is None):
         raise ValueError("give the poses: openpose=FOLDER or poses=PICKLE (one of them)")
+    check_options(obs_length, tte, overlap, threshold)
     refuse_existing(out, force)
     tracks, sizes, note = read_jaad(root, subset, split_dir)
     key = lambda set_id, video: video  # noqa: E731  (JAAD: one set)

@@ -22,7 +22,7 @@ from pathlib import Path
 from .annotation_xml import (check_values, crossing_attributes, parse_xml, track_boxes,
                              video_size)
 from .benchmark_annotations import (BENCHMARK, OpenPoseFrames, PickledPoses, Track,
-                                    import_tracks, refuse_existing)
+                                    check_options, import_tracks, refuse_existing)
 from .readers import BadInput
 
 __all__ = ["SET_SPLIT", "read_pie", "import_pie"]
@@ -122,6 +122,7 @@ def import_pie(root, out, *, openpose=None, poses=None, threshold: float = 0.3,
     :mod:`.benchmark_windows`."""
     if (openpose is None) == (poses is None):
         raise ValueError("give the poses: openpose=FOLDER or poses=PICKLE (one of them)")
+    check_options(obs_length, tte, overlap, threshold)
     refuse_existing(out, force)
     tracks, sizes, note = read_pie(root)
     source = OpenPoseFrames(openpose, _key) if openpose else PickledPoses(poses, _key, derive)
