@@ -5,6 +5,8 @@
 # (docs/security.md, "Fuzzing and sanitizers"), each in its own build directory.
 # make wheel: a self-contained manylinux wheel in dist/ (docs/install.md); make wheel-check:
 # that wheel installed and run on an emulated machine without compilers (CI runs it).
+# make wheels: one such wheel per supported CPython, 3.10 to 3.13; make wheels-check: each
+# built and run in a clean venv of its own Python, with the torch extra (docs/install.md).
 SHELL := /bin/bash
 PY = $$(cat build/.python)
 WERROR ?= OFF
@@ -12,7 +14,8 @@ WERROR ?= OFF
 TESTS ?= OFF
 
 .PHONY: all deps install test test-cpp test-python demo bench clean \
-	fuzz fuzz-one fuzz-build test-asan test-asan-cpp test-tsan wheel wheel-check
+	fuzz fuzz-one fuzz-build test-asan test-asan-cpp test-tsan wheel wheel-check \
+	wheels wheels-check
 all: install
 
 deps:
@@ -45,6 +48,19 @@ wheel: deps
 
 wheel-check: deps
 	@bash tools/wheel_check.sh "" $(PY)
+
+# One wheel per CPython (3.10-3.13; VERSIONS="3.12" for fewer), each with its own build
+# environment and build directory under build/wheels/ (never build/wheel: `make install`'s
+# stays as it is); with ccache the core's objects are compiled once for all four.
+VERSIONS ?= 3.10 3.11 3.12 3.13
+wheels: deps
+	@bash tools/build_wheels.sh $(VERSIONS)
+
+# The matrix: each wheel built (incrementally) and checked in a fresh venv of its Python
+# on the emulated bare machine, with the torch and preview extras and a one-epoch bsp-train;
+# its table in build/wheels/matrix.md.
+wheels-check: deps
+	@bash tools/wheel_matrix.sh $(VERSIONS)
 
 # ---------------------------------------------------------------- sanitizers and fuzzing
 # Builds in build/asan, build/tsan and build/fuzz with their own flags; build/wheel (the

@@ -21,7 +21,8 @@
 # files of the bindings.
 #
 # Environment: WHEELS_BUILD_LOCK=FILE takes `flock FILE` around each compile (checkouts
-# sharing a machine then never compile at once); CMAKE_BUILD_PARALLEL_LEVEL (default 2).
+# sharing a machine then never compile at once); WERROR=ON builds with warnings as errors
+# (as `make test WERROR=ON`; CI); CMAKE_BUILD_PARALLEL_LEVEL (default 2).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VERSIONS=("$@")
@@ -32,10 +33,10 @@ fi
 # (the versions `make deps` installed on the build machines when this was written).
 BUILD_REQUIREMENTS=("scikit-build-core==1.1.2" "pybind11==3.1.0")
 # --config-settings, not -C: the pip of a fresh 3.10 venv (23.0) has no -C
-SETTINGS=()
+SETTINGS=(--config-settings=cmake.define.BSP_WERROR="${WERROR:-OFF}")
 if command -v ccache >/dev/null; then
-  SETTINGS=(--config-settings=cmake.define.CMAKE_CXX_COMPILER_LAUNCHER=ccache
-            --config-settings=cmake.define.CMAKE_C_COMPILER_LAUNCHER=ccache)
+  SETTINGS+=(--config-settings=cmake.define.CMAKE_CXX_COMPILER_LAUNCHER=ccache
+             --config-settings=cmake.define.CMAKE_C_COMPILER_LAUNCHER=ccache)
 fi
 
 # find_python 3.12: the path of a CPython 3.12, or exit 1 saying where it looked. pyenv's

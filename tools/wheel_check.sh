@@ -74,6 +74,10 @@ z = zipfile.ZipFile(sys.argv[1])
 names = z.namelist()
 inside = {n.rsplit("/", 1)[-1] for n in names}
 vendored = [i for i in z.infolist() if i.filename.startswith("bsp_fast.libs/") and not i.is_dir()]
+with open(sys.argv[3], "a") as summary:
+    print(f"wheel={sys.argv[1].rsplit('/', 1)[-1]}\nplatform={tag.group(1)}\n"
+          f"wheel_mb={os.path.getsize(sys.argv[1]) / 1e6:.1f}\nlibraries={len(vendored)}",
+          file=summary)
 external = {}
 for name in names:
     data = z.read(name)
@@ -84,10 +88,6 @@ for name in names:
             for tag in section.iter_tags("DT_NEEDED"):
                 if tag.needed not in inside:
                     external.setdefault(tag.needed, set()).add(name.rsplit("/", 1)[-1])
-with open(sys.argv[3], "a") as summary:
-    print(f"wheel={sys.argv[1].rsplit('/', 1)[-1]}\ntag={tag.group(1)}\n"
-          f"wheel_mb={os.path.getsize(sys.argv[1]) / 1e6:.1f}\nlibraries={len(vendored)}",
-          file=summary)
 print(f"wheel_check: {len(vendored)} libraries vendored "
       f"({sum(i.file_size for i in vendored) / 1e6:.0f} MB unpacked); from the system: "
       f"{' '.join(sorted(external))}")
