@@ -10,6 +10,7 @@ stands below both), and its modules import matplotlib only when they draw.
 * :mod:`.run_tables`: ``bsp-eval --table`` and the table bsp-train prints;
 * :mod:`.curves`: a run's ``curves.png``, and the helper every figure is saved with;
 * :mod:`.breakdown`: ``bsp-eval --breakdown``'s text and a table's breakdown over seeds;
+* :mod:`.findings`: a finding's cells, made when the finding is (one run, or with seeds);
 * :mod:`.reproduced`: a reproduced table, its findings, marks and notes (``results.md``);
 * :mod:`.figures`: a table file's declared figures and its learning curves;
 * :mod:`.results_page`: the sections of docs/results.md from the published tables.

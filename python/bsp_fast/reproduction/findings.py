@@ -7,7 +7,7 @@ on the report's own numbers fill the report column of both. See docs/reproduce.m
 from __future__ import annotations
 
 from ..metrics.uncertainty import MIN_SEEDS, UNSURE
-from ..reporting.values import format_value
+from ..reporting.findings import point_text, report_drop_text
 from ..training.tasks import get_task
 from .table_files import rows_of
 
@@ -30,60 +30,45 @@ def _rel(a, b, relation, margin=0.0) -> bool:
     return {">": d > margin, ">=": d >= -margin, "<": d < -margin, "<=": d <= margin}[relation]
 
 
+def _holds(tab, f, v: dict, initial: dict) -> bool:
+    """Whether one finding holds on ``v[row]`` (``initial[row]``: the value it compares
+    with, where it needs one)."""
+    sign, k = better(tab, f["metric"]), f["kind"]
+    if k == "order":
+        rs = f["rows"]
+        return all(sign * (v[a] - v[b]) > 0 for a, b in zip(rs, rs[1:]))
+    if k == "compare":
+        return _rel(v[f["a"]], v[f["b"]], f.get("relation", ">="), f.get("margin", 0.0))
+    if k == "drop":
+        return sign * (v[f["base"]] - v[f["other"]]) > 0
+    if k == "robuster":
+        return (sign * (v[f["a"][0]] - v[f["a"][1]])) < (sign * (v[f["b"][0]] - v[f["b"][1]]))
+    if k == "at_least":
+        return v[f["row"]] >= f["value"]
+    if k == "fails":
+        return v[f["row"]] <= initial[f["row"]] + f.get("margin", 0.0)
+    return all(sign * (v[r] - initial[r]) > 0 for r in f["rows"])  # beats_initial
+
+
 def _finding(tab, f, values: dict, initial: dict) -> tuple:
     """(ours, report, direction) of one finding; ``values[source][row]`` is the metric of a row
-    (source ``ours`` or ``report``); ``initial[row]`` the trivial baseline's (ours only)."""
-    metric, sign = f["metric"], better(tab, f["metric"])
-    fm = lambda v: format_value(tab, metric, v)  # noqa: E731
-    pp = " p.p." if tab["metrics"][metric].get("format") == "pct" else ""
-    out = {}
+    (source ``ours`` or ``report``); ``initial[row]`` the trivial baseline's (ours only).
+    The cells' text is :func:`bsp_fast.reporting.findings.point_text`'s."""
+    need, out = rows_of(f), {}
     for src in ("ours", "report"):
         v = values[src]
-        need = rows_of(f)
-        if f["kind"] in ("fails", "beats_initial", "at_least"):
-            # a threshold or a trivial baseline is ours to test; the report column says
-            # what the report stated (report_text)
-            if src == "report" or (f["kind"] != "at_least"
-                                   and any(initial.get(r) is None for r in need)):
-                out[src] = ("", None)
-                continue
-        if any(v.get(r) is None for r in need):
+        # a threshold or a trivial baseline is ours to test; the report column says what
+        # the report stated (report_text)
+        mine_only = f["kind"] in ("fails", "beats_initial", "at_least") and (
+            src == "report" or (f["kind"] != "at_least"
+                                and any(initial.get(r) is None for r in need)))
+        if mine_only or any(v.get(r) is None for r in need):
             out[src] = ("", None)
             continue
-        k = f["kind"]
-        if k == "order":
-            rs = f["rows"]
-            ok = all(sign * (v[a] - v[b]) > 0 for a, b in zip(rs, rs[1:]))
-            text = rs[0] + " " + fm(v[rs[0]])
-            for a, b in zip(rs, rs[1:]):
-                op = "<" if v[a] < v[b] else (">" if v[a] > v[b] else "=")
-                text += f" {op} {b} {fm(v[b])}"
-        elif k == "compare":
-            ok = _rel(v[f["a"]], v[f["b"]], f.get("relation", ">="), f.get("margin", 0.0))
-            text = f"{f['a']} {fm(v[f['a']])} vs {f['b']} {fm(v[f['b']])}"
-        elif k == "drop":
-            drop = sign * (v[f["base"]] - v[f["other"]])
-            ok = drop > 0
-            text = f"{fm(v[f['base']])} -> {fm(v[f['other']])} (loss {fm(drop)}{pp})"
-        elif k == "robuster":
-            la = sign * (v[f["a"][0]] - v[f["a"][1]])
-            lb = sign * (v[f["b"][0]] - v[f["b"][1]])
-            ok = la < lb
-            text = f"loss {fm(la)}{pp} vs {fm(lb)}{pp}"
-        elif k == "at_least":
-            ok = v[f["row"]] >= f["value"]
-            text = f"{f['row']} {fm(v[f['row']])} (threshold {fm(f['value'])})"
-        elif k == "fails":
-            r = f["row"]
-            ok = v[r] <= initial[r] + f.get("margin", 0.0)
-            what = _baseline(tab, f)[0]
-            text = f"{fm(v[r])} vs {what} {fm(initial[r])}"
-        else:  # beats_initial
-            ok = all(sign * (v[r] - initial[r]) > 0 for r in f["rows"])
-            text = "; ".join(f"{r} {fm(v[r])} vs {fm(initial[r])}" for r in f["rows"])
-        out[src] = (text, ok)
+        out[src] = (point_text(tab, f, v, initial, _baseline(tab, f)[0]),
+                    _holds(tab, f, v, initial))
     if f["kind"] == "drop" and f.get("report") is not None and out["report"][1] is None:
-        out["report"] = (f"loss about {fm(f['report'])}{pp}", True)
+        out["report"] = (report_drop_text(tab, f), True)
     ours, ok = out["ours"]
     report = out["report"][0] or f.get("report_text", "stated in the report")
     direction = NA if ok is None else (HOLDS if ok else FAILS)
