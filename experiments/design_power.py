@@ -6,10 +6,10 @@ design a table file registers before its runs (``design:``: its seeds, a row's
 sizes.
 
 For a comparison, S is the fewest seeds among the rows it compares (runs are paired on
-shared seed numbers; the finding's rows where the comparison names none) and R the test recordings: the registered test set's
-``scale`` x the published recordings (its test split under the same conversion), else the
-published ones. Power: the normal approximation at Holm's first level (0.05 / m), as the
-power table's. ``--write`` registers the result as ``design.power`` in the table file
+shared seed numbers; the finding's rows where the comparison names none) and R the test
+recordings: the registered test set's ``recordings`` (its test split counted under the
+table's conversion), else the published ones. Power: the normal approximation at Holm's
+first level (0.05 / m), as the power table's. ``--write`` registers the result as ``design.power`` in the table file
 (inside its protocol hash: written before any run of the design).
 
     python experiments/design_power.py [--write] [TABLE ...]
@@ -69,7 +69,9 @@ def design_power(tab: dict, res: dict) -> dict:
             named = [r for r in q["label"].split(" ") if r in counts] or rows
             S = min((counts[r] for r in named), default=seeds)
             eff, why = P.effect(tab, f, q["label"])
-            R = int(round(comp["recordings"] * scale))
+            # the registered test set's recordings (its test split, counted under this
+            # table's conversion), else scale x the published ones
+            R = int(ts["recordings"]) if ts else comp["recordings"]
 
             def power(s, r):
                 se = math.sqrt(comp["seed"] / s + comp["recording"] / r

@@ -65,7 +65,8 @@ class ClipData:
                  seed: int | None = None, eval_seed: int = DEFAULT_EVAL_SEED,
                  sampler_seed: int | None = None, block_size: int = 32, pin_memory: bool = False,
                  persistent_workers: bool | None = None, convert_options: dict | None = None,
-                 dataset_options: dict | None = None, cache_dir=None, verbose: bool = True):
+                 dataset_options: dict | None = None, cache_dir=None, verbose: bool = True,
+                 test_dir=None):
         super().__init__()
         if task not in TASKS:
             raise ValueError(f"task must be one of {list(TASKS)}, got {task!r}")
@@ -115,7 +116,17 @@ class ClipData:
             sampler_seed=sampler_seed, block_size=block_size, pin_memory=bool(pin_memory),
             persistent_workers=persistent_workers, convert_options=dict(convert_options or {}),
             dataset_options=saved, cache_dir=None if cache_dir is None else str(cache_dir),
-            verbose=bool(verbose))
+            verbose=bool(verbose), test_dir=None if test_dir is None else str(test_dir))
+        #: ``test_dir``: another dataset directory whose test split, converted with these
+        #: same options, replaces this one's (a registered independent test set)
+        self.test_data = None if test_dir is None else ClipData(
+            dataset_dir=test_dir, task=task, clip_length=clip_length,
+            clip_offset=clip_offset, benchmark=benchmark, balance=balance, noise=noise,
+            mjp=mjp, batch_size=batch_size, num_workers=num_workers, augment=augment,
+            seed=seed, eval_seed=eval_seed, sampler_seed=sampler_seed,
+            block_size=block_size, pin_memory=pin_memory,
+            persistent_workers=persistent_workers, convert_options=convert_options,
+            dataset_options=dataset_options, verbose=verbose)
 
     @classmethod
     def benchmark(cls, dataset_dir=None, h5_path=None, task: str = "classification", **kwargs):
@@ -175,8 +186,14 @@ class ClipData:
 
     def prepare_data(self) -> None:
         """Converts ``dataset_dir`` into :attr:`h5_path` through the C++ core unless an
-        up-to-date conversion exists (then it says so and reuses it). Once done, later
-        calls (Lightning's fit, validate and test each call it) do nothing."""
+        up-to-date conversion exists (then it says so and reuses it), and the test dataset
+        (``test_dir``) likewise. Once done, later calls (Lightning's fit, validate and test
+        each call it) do nothing."""
+        self._prepare_own()
+        if self.test_data is not None:
+            self.test_data.prepare_data()
+
+    def _prepare_own(self) -> None:
         path = self.h5_path
         if self.reused is not None and path.exists():
             return
@@ -263,6 +280,10 @@ class ClipData:
         self.clip_length = int(self.datasets[want[0]].clip_length)
 
     def _dataset(self, split: str) -> ClipDataset:
+        if split == "test" and self.test_data is not None:
+            if self.test_data.reused is None:
+                self.test_data.prepare_data()
+            return self.test_data._dataset("test")
         train = split == "train"
         options = dict(noise=self.noise, mjp=self.mjp,
                        seed=self.seed if train else self.eval_seed,

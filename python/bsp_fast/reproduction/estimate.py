@@ -90,10 +90,11 @@ def cpu_kind() -> dict:
 
 
 def avx2_factor(task: str, model: str, precision: str, cpu: dict, step_s: float | None = None,
-                batch: int | None = None) -> float | None:
+                batch: int | None = None, default_hp: bool = True) -> float | None:
     """This machine's CPU seconds -> an AVX2-only core's: 1 on a CPU without AVX512, the
     measured float32 ratio otherwise (at least the AVX2 core's own measured step over this
-    probe's, for the model at the batch it was measured at: :data:`AVX2_FLOAT32_STEP`);
+    probe's, for the model with its default hyper-parameters at the batch it was measured
+    at: :data:`AVX2_FLOAT32_STEP`);
     None for bf16 (not translated: 5-17x slower there)."""
     if str(precision).startswith("bf16"):
         return None
@@ -102,7 +103,7 @@ def avx2_factor(task: str, model: str, precision: str, cpu: dict, step_s: float 
     key = f"{task}/{model}"
     factor = AVX2_FLOAT32_FACTOR.get(key, AVX2_DEFAULT_FACTOR)
     at = AVX2_FLOAT32_STEP.get(key)
-    if at is not None and step_s and batch == at[0]:
+    if at is not None and step_s and batch == at[0] and default_hp:
         factor = max(factor, at[1] / 1000.0 / step_s)
     return factor
 
@@ -261,7 +262,12 @@ def probe_row(tab: dict, row: dict, budget: str, data, overrides=None, *, steps:
     step_s = statistics.median(_timed(train_loader, n, train_step))
     _timed(val_loader, 1, eval_step)
     eval_s = statistics.median(_timed(val_loader, max(1, eval_batches), eval_step))
+    from ..models import catalogue
+
+    defaults = catalogue.hparams(cfg["task"], cfg["model"])
+    default_hp = all(defaults.get(k, object()) == v for k, v in (cfg["hp"] or {}).items())
     return {"model": cfg["model"], "task": cfg["task"], "precision": precision,
+            "default_hp": default_hp,
             "threads": int(cfg["threads"] or torch.get_num_threads()), "step_s": step_s,
             "eval_s": eval_s, **counts, "epochs": int(cfg["epochs"]),
             "max_steps": int(cfg.get("max_steps") or 0) or None, "convert_s": convert_s,
@@ -303,7 +309,7 @@ def estimate_table(tab: dict, data, budget: str = "quick", *, seeds: int | None 
                          epochs=p["epochs"], max_steps=p["max_steps"],
                          test_passes=test_passes, test_scale=scale)
         factor = avx2_factor(p["task"], p["model"], p["precision"], cpu, p["step_s"],
-                             p["batch_size"])
+                             p["batch_size"], p["default_hp"])
         per_avx2 = None if factor is None else cost["total_s"] * factor
         out["rows"][name] = dict(p, updates=cost["updates"], epochs=cost["epochs"],
                                  train_s=cost["train_s"], seeds=counts[name],

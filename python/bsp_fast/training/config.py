@@ -144,6 +144,10 @@ OPTIONS: tuple = (
        " a source marked data: true reads --data)", "data", metavar="NAME=FILE", scoring=True),
     _o("test_on", "str", None, "with --mix: test on this source's test split alone (default: "
        "every source's)", "data", metavar="NAME", scoring=True),
+    _o("test_data", "path", None, "score the test split of this dataset directory instead "
+       "of --data's, converted with the run's own options (clip length, windows, split "
+       "seed): a table's registered independent test set (docs/reproduce.md, 'Tables any "
+       "machine can finish')", "data", metavar="DIR", scoring=True),
     # ------------------------------------------------------------------ model
     _o("hp", "hp", {}, "a model hyper-parameter, KEY=VALUE (repeatable; YAML value syntax); "
        "checked against the model's hyper-parameters", "model", metavar="KEY=VALUE"),
@@ -245,6 +249,10 @@ def validate(cfg: dict) -> dict:
         cfg = mix_tables.check_run(cfg, error=ConfigError)  # may set data: the first file
     if cfg.get("data") is None:
         raise ConfigError("no data given (--data DATASET_DIR or clips.h5)")
+    if cfg.get("test_data") is not None and (cfg.get("mix") is not None
+                                             or cfg.get("test_on")):
+        raise ConfigError("test_data replaces --data's test split; with --mix, test on "
+                          "another dataset with --test-on NAME --mix-data NAME=FILE")
     if cfg["label"] != "last" and not cfg["label"].startswith("any:"):
         raise ConfigError(f"label must be 'last' or 'any:F', got {cfg['label']!r}")
     try:

@@ -50,6 +50,7 @@ def make_datamodule(cfg: dict, h5=None, *, plain: bool = False):
                batch_size=cfg["batch_size"], num_workers=cfg["workers"],
                augment=augment, seed=cfg["seed"], sampler_seed=cfg["seed"],
                convert_options=convert, dataset_options=dataset_options,
+               test_dir=cfg.get("test_data"),
                verbose=not cfg["quiet"] and (plain or rank() == 0))
 
 
