@@ -38,7 +38,7 @@ def design_power(tab: dict, res: dict) -> dict:
     """``{"level", "comparisons", "findings": [{finding, comparison, effect, seeds,
     recordings, power_now, power}]}`` at the table file's registered design."""
     from bsp_fast.reproduction import evidence as E
-    from bsp_fast.reproduction.estimate import registered_seeds, row_seed_counts
+    from bsp_fast.reproduction.estimate import moved_rows, registered_seeds, row_seed_counts
     from bsp_fast.reproduction.protocol import confirmatory
     from bsp_fast.reproduction.table_files import rows_of
     from bsp_fast.reproduction.test_sets import registered_test_set
@@ -46,6 +46,7 @@ def design_power(tab: dict, res: dict) -> dict:
     P = _power_module()
     seeds = registered_seeds(tab, "quick") or 5
     counts = row_seed_counts(tab, "quick", seeds)
+    moved = moved_rows(tab, "quick")
     ts = registered_test_set(tab)
     scale = float(ts["scale"]) if ts else 1.0
     sums, have = E._Sums(res), set(res["results"])
@@ -68,6 +69,7 @@ def design_power(tab: dict, res: dict) -> dict:
             # baseline), else the finding's
             named = [r for r in q["label"].split(" ") if r in counts] or rows
             S = min((counts[r] for r in named), default=seeds)
+            gone = sorted({r for r in named + rows_of(f) if r in moved})
             eff, why = P.effect(tab, f, q["label"])
             # the registered test set's recordings (its test split, counted under this
             # table's conversion), else scale x the published ones
@@ -82,13 +84,14 @@ def design_power(tab: dict, res: dict) -> dict:
                         "effect": round(eff, 4), "effect_from": why,
                         "seeds": S, "recordings": R,
                         "power_now": round(power(comp["seeds"], comp["recordings"]), 3),
-                        "power": round(power(S, R), 3)})
+                        "power": None if gone else round(power(S, R), 3),
+                        **({"moved": gone} if gone else {})})
     return {"level": round(level, 5), "comparisons": m, "seeds": seeds,
             "test_scale": scale, "findings": out}
 
 
 def markdown(name: str, p: dict) -> str:
-    decided = sum(1 for f in p["findings"] if f["power"] >= 0.8)
+    decided = sum(1 for f in p["findings"] if (f["power"] or 0) >= 0.8)
     lines = [f"#### {name}: {p['comparisons']} confirmatory comparisons at Holm level "
              f"{p['level']:g}; design {p['seeds']} seeds, test set x{p['test_scale']:g}: "
              f"{decided} of {len(p['findings'])} at 80 % power", "",
@@ -97,7 +100,8 @@ def markdown(name: str, p: dict) -> str:
     for f in p["findings"]:
         lines.append(f"| {f['finding']} | {f['comparison']} | {f['effect']:g} | "
                      f"{f['seeds']} × {f['recordings']} | {100 * f['power_now']:.0f} % | "
-                     f"{100 * f['power']:.0f} % |")
+                     + (f"{100 * f['power']:.0f} % |" if f["power"] is not None else
+                        f"moved to full ({', '.join(f['moved'])}) |"))
     return "\n".join(lines)
 
 
