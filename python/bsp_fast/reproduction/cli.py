@@ -46,6 +46,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data", required=True, metavar="DATASET_OR_H5",
                    help="CARLA-BSP dataset directory (e.g. from bsp-synth) or a bsp-convert "
                         "HDF5 file")
+    p.add_argument("--mix-data", action="append", default=[], metavar="NAME=FILE",
+                   help="a clip file of a mixing table's source (repeatable; the mixed "
+                        "table's jaad and pie: docs/interop.md, Mixed training)")
     p.add_argument("--budget", default="quick", choices=BUDGETS,
                    help="option set of the table file to train with (default: quick)")
     p.add_argument("--out", default="runs", metavar="DIR",
@@ -99,7 +102,7 @@ def parse_set(items) -> dict:
     allowed = {o.name: o for o in C.OPTIONS if o.name not in NOT_OVERRIDES or o.name == "hp"}
     out = {}
     for key, value in C.parse_hp(items).items():
-        if key in NOT_OVERRIDES:
+        if key in NOT_OVERRIDES and key != "hp":
             raise C.ConfigError(f"--set {key}: not a per-row override; bsp-reproduce sets it "
                                 "itself (the table's rows, --seeds, --data, --out, --force)")
         if key not in allowed:
@@ -123,6 +126,9 @@ def _main(ns) -> int:
     # every argument and input checked before PyTorch is imported
     tab = load_table(ns.table)
     overrides = parse_set(ns.set)
+    if ns.mix_data:  # an input, like --data: the files the table's mixes read
+        overrides["mix_data"] = {**overrides.get("mix_data", {}),
+                                 **C.BY_NAME["mix_data"].convert(ns.mix_data)}
     if not Path(ns.data).exists():
         raise RunError(f"--data {ns.data}: no such dataset directory or HDF5 file")
     if ns.estimate:
@@ -151,8 +157,9 @@ def _main(ns) -> int:
 
                     print(f"published {publish(tab, res['dir'], ns.publish)}")
     except (Interrupted, KeyboardInterrupt) as exc:
-        print("bsp-reproduce: interrupted; finished rows are kept and reused, an interrupted "
-              "row continues where it stopped when the same command is run again",
+        why = f" ({exc})" if isinstance(exc, Interrupted) else ""
+        print(f"bsp-reproduce: interrupted{why}; finished rows are kept and reused, an "
+              "interrupted row continues where it stopped when the same command is run again",
               file=sys.stderr)
         return getattr(exc, "code", 130)
     return 0
