@@ -65,12 +65,13 @@ build_one() {
   local python env_py start wheel
   python=$(find_python "$version")
   env_py=$dir/env/bin/python
-  if ! "$env_py" -c 'import scikit_build_core, pybind11' 2>/dev/null; then
+  if ! "$env_py" -c '' 2>/dev/null; then
     echo "build_wheels: $version: build environment $dir/env ($python)"
     rm -rf "$dir/env"
     "$python" -m venv "$dir/env"
-    "$env_py" -m pip install -q "${BUILD_REQUIREMENTS[@]}"
   fi
+  # every time: nothing is fetched while the pins are installed, and a changed pin applies
+  "$env_py" -m pip install -q "${BUILD_REQUIREMENTS[@]}"
   rm -rf "$dir/raw"
   echo "build_wheels: $version: pip wheel (C++ core in $dir/cmake)"
   start=$SECONDS
