@@ -324,11 +324,11 @@ def test_published_table_renders_into_its_readme_section(finished, monkeypatch):
                       "-->\nstale\n<!-- results:autoencoder:end -->\nend\n")
     assert RM.differing_sections(readme.read_text(), results_dir, readme.parent) == [
         "tiny_ae/smoke", "autoencoder"]
-    assert RM.main(["--readme", str(readme), "--results", str(results_dir), "--check"]) == 1
-    assert RM.main(["--readme", str(readme), "--results", str(results_dir)]) == 0
+    assert RM.main(["--page", str(readme), "--results", str(results_dir), "--check"]) == 1
+    assert RM.main(["--page", str(readme), "--results", str(results_dir)]) == 0
     text = readme.read_text()
     assert text.startswith("intro\n") and "\nbetween\n" in text and text.endswith("\nend\n")
-    assert RM.main(["--readme", str(readme), "--results", str(results_dir), "--check"]) == 0
+    assert RM.main(["--page", str(readme), "--results", str(results_dir), "--check"]) == 0
     section = text.split("results:tiny_ae/smoke:begin -->")[1].split("<!-- results:tiny_ae")[0]
     value = doc["results"]["clean"]["metrics"]["pck_0.05"]
     row = next(ln for ln in section.splitlines() if ln.startswith("| clean |"))

@@ -230,7 +230,7 @@ def main(argv=None) -> int:
                     "docs/results/TABLE-BUDGET.json and the table files. Exit codes: 0 done "
                     "(or, with --check, up to date), 1 --check found sections that differ, "
                     "2 bad input.")
-    p.add_argument("--page", "--readme", dest="page", default=None, metavar="FILE",
+    p.add_argument("--page", dest="page", default=None, metavar="FILE",
                    help="the page to rewrite (default: docs/results.md of the working "
                         "directory, else of the source tree)")
     p.add_argument("--results", default=None, metavar="DIR",
