@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from bsp_fast.reporting.estimate import format_estimate
 from bsp_fast.reproduction import estimate as E
 from bsp_fast.reproduction import test_sets as T
 from bsp_fast.reproduction.table_files import experiments_dir, load_table
@@ -80,7 +81,7 @@ def test_estimate_probes_every_row_at_its_registered_seeds(tmp_path, clip_file):
         assert r["precision"] == "32" and r["step_s"] > 0 and r["eval_s"] > 0
         assert r["updates"] == 5 and r["seeds"] == 10
         assert r["total_s"] == pytest.approx(10 * r["per_seed_s"])
-    text = E.format_estimate(est)
+    text = format_estimate(est)
     assert "moved to the full budget (GPU): needs a GPU" in text
     assert "against the budget of 8 CPU h" in text
 

@@ -13,5 +13,6 @@ stands below both), and its modules import matplotlib only when they draw.
 * :mod:`.findings`: a finding's cells, made when the finding is (one run, or with seeds);
 * :mod:`.reproduced`: a reproduced table, its findings, marks and notes (``results.md``);
 * :mod:`.figures`: a table file's declared figures and its learning curves;
+* :mod:`.estimate`: ``bsp-reproduce --estimate``'s table and verdict;
 * :mod:`.results_page`: the sections of docs/results.md from the published tables.
 """

@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 __all__ = ["BUDGET_CPU_HOURS", "AVX2_FLOAT32_FACTOR", "AVX2_DEFAULT_FACTOR", "FIVE_MINUTES", "AVX2_FLOAT32_STEP",
-           "cpu_kind", "seed_cost", "probe_row", "estimate_table", "format_estimate",
+           "cpu_kind", "seed_cost", "probe_row", "estimate_table",
            "registered_seeds", "row_seed_counts", "moved_rows", "test_scale", "STARTUP_S",
            "main_estimate"]
 
@@ -280,7 +280,8 @@ def estimate_table(tab: dict, data, budget: str = "quick", *, seeds: int | None 
     """Probes every wanted row (a row that reads another row's run costs nothing of its
     own) and returns ``{"table", "budget", "seeds", "cpu", "rows": {name: {...probe,
     "seeds", "per_seed_s", "per_seed_avx2_s", "total_avx2_s"}}, "total_s", "total_avx2_s",
-    "budget_s", "fits"}``."""
+    "budget_s", "fits", "cheap", "startup_s"}`` (rendered by
+    :func:`bsp_fast.reporting.estimate.format_estimate`)."""
     from .table_files import wanted_rows
 
     n_seeds = seeds or registered_seeds(tab, budget) or 5
@@ -326,68 +327,12 @@ def estimate_table(tab: dict, data, budget: str = "quick", *, seeds: int | None 
     out["bf16_rows"] = unknown
     out["total_avx2_s"] = None if unknown else sum(r["total_avx2_s"] for r in rs)
     out["fits"] = out["total_avx2_s"] is not None and out["total_avx2_s"] <= out["budget_s"]
+    # the rows the 10-seed rule of issue #57 applies to, and the start-up each run counts
+    out["cheap"] = [n for n, r in out["rows"].items() if "reads" not in r
+                    and r["per_seed_avx2_s"] is not None
+                    and r["per_seed_avx2_s"] < FIVE_MINUTES]
+    out["startup_s"] = STARTUP_S
     return out
-
-
-def _min(s) -> str:
-    return "–" if s is None else f"{s / 60:,.1f}"
-
-
-def format_estimate(est: dict) -> str:
-    """The estimate as a markdown table and its verdict against the budget."""
-    cpu = est["cpu"]
-    kind = ("AVX512" + (" with native bf16 (AVX512-BF16/AMX)" if cpu["bf16"] else
-                        ", no native bf16") if cpu["avx512"] else "AVX2-only")
-    lines = [f"### Estimate: {est['table']} ({est['budget']} budget, {est['seeds']} seeds a "
-             f"row unless capped)", "",
-             f"Probe on {cpu['model']} ({kind}); CPU seconds of this process "
-             "(time.process_time). AVX2 column: x the measured float32 ratio of an "
-             "AVX2-only core (docs/performance.md); bf16 rows are not translated.", "",
-             "| row | model | precision | batch | updates (cap) | epochs | CPU s/update | "
-             "CPU s/val batch | val / test batches | CPU min/seed here | x AVX2 | "
-             "CPU min/seed AVX2 | seeds | CPU min AVX2 |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for name, r in est["rows"].items():
-        if "reads" in r:
-            lines.append(f"| {name} | (reads {r['reads']}'s run) | | | | | | | | 0 | | 0 | "
-                         f"{r['seeds']} | 0 |")
-            continue
-        f = "–" if r["avx2_factor"] is None else f"{r['avx2_factor']:.2f}"
-        lines.append(
-            f"| {name} | {r['model']} | {r['precision']} | {r['batch_size']} | "
-            f"{r['updates']:,} | {r['epochs']} | {r['step_s']:.3f} | {r['eval_s']:.3f} | "
-            f"{r['val_batches']} / {r['test_batches']} | {_min(r['per_seed_s'])} | {f} | "
-            f"{_min(r['per_seed_avx2_s'])} | {r['seeds']} | {_min(r['total_avx2_s'])} |")
-    hours = est["budget_s"] / 3600
-    for name, r in est["rows"].items():
-        if r.get("note"):
-            lines.append(f"| {name} | {r['note']} | | | | | | | | | | | | |")
-    for name, why in est.get("moved", {}).items():
-        lines.append(f"| {name} | moved to the full budget (GPU): {why} | | | | | | | | | | "
-                     "| | |")
-    lines.append("")
-    if est.get("test_scale", 1) != 1:
-        lines.append(f"Test passes on the registered test set, {est['test_scale']:g} x the "
-                     "data's own test split.")
-    lines.append(f"Total here: {est['total_s'] / 3600:.2f} CPU h.")
-    if est["total_avx2_s"] is None:
-        lines.append(f"Total on an AVX2-only core: not estimated: rows "
-                     f"{', '.join(est['bf16_rows'])} train in bf16, which such a core runs "
-                     f"5-17x slower than float32 (move them to the full budget or pin "
-                     f"precision \"32\"). Budget: {hours:g} CPU h.")
-    else:
-        verdict = "fits" if est["fits"] else "does NOT fit"
-        lines.append(f"Total on an AVX2-only core: {est['total_avx2_s'] / 3600:.2f} CPU h "
-                     f"against the budget of {hours:g} CPU h: {verdict}.")
-    cheap = [n for n, r in est["rows"].items() if "reads" not in r
-             and r["per_seed_avx2_s"] is not None and r["per_seed_avx2_s"] < FIVE_MINUTES]
-    if cheap:
-        lines.append(f"Under 5 CPU min per seed (AVX2): {', '.join(cheap)} (10 seeds by "
-                     "the rule of issue #57).")
-    lines.append(f"Upper bounds: the budget's cap of updates; early stopping may end a run "
-                 f"sooner. Each run counts {STARTUP_S:g} CPU s of start-up, checkpoints and "
-                 "figures.")
-    return "\n".join(lines)
 
 
 def main_estimate(tab: dict, data, budget: str, *, seeds: int | None, rows=None,
@@ -395,6 +340,8 @@ def main_estimate(tab: dict, data, budget: str, *, seeds: int | None, rows=None,
     """The ``--estimate`` of ``bsp-reproduce``: prints the estimate (and writes it as JSON
     beside the runs' folder when ``out`` is given); exit status 0."""
     import json
+
+    from ..reporting.estimate import format_estimate
 
     est = estimate_table(tab, data, budget, seeds=seeds, rows=rows, overrides=overrides,
                          log=log)
