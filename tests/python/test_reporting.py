@@ -39,7 +39,8 @@ def test_reporting_imports_neither_training_nor_reproduction():
 def test_importing_the_renderers_loads_no_training_code():
     code = ("import sys, bsp_fast.reporting.reproduced, bsp_fast.reporting.breakdown, "
             "bsp_fast.reporting.results_page, bsp_fast.reporting.run_tables, "
-            "bsp_fast.reporting.figures, bsp_fast.reporting.curves, bsp_fast.reporting.findings; "
+            "bsp_fast.reporting.figures, bsp_fast.reporting.curves, bsp_fast.reporting.findings, "
+            "bsp_fast.reporting.estimate; "
             "print(sorted(m for m in sys.modules if m.startswith(('bsp_fast.training', "
             "'bsp_fast.reproduction', 'torch', 'matplotlib'))))")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
