@@ -1,6 +1,7 @@
 """Text and figures of the test breakdowns: one run's ``bsp-eval --breakdown`` document
-(:func:`bsp_fast.training.eval_breakdown.build_breakdown`) as markdown tables, a long CSV
-(one line per table, row and value) or JSON (NaN written as null); and a table's
+(:func:`bsp_fast.training.eval_breakdown.build_breakdown`, whose column headers and bin
+labels are these) as markdown tables, a long CSV (one line per table, row and value) or
+JSON (NaN written as null); and a table's
 breakdown over seeds (``bsp-reproduce --breakdown``,
 :func:`bsp_fast.reproduction.table_breakdown.aggregate`) as ``breakdown.md`` and one bar
 figure per breakdown table.
@@ -20,8 +21,9 @@ from pathlib import Path
 
 from .values import format_metric
 
-__all__ = ["format_breakdown", "run_heading", "table_heading", "to_json", "plain", "FORMATS", "COUNTS",
-           "format_aggregate", "draw_breakdowns"]
+__all__ = ["format_breakdown", "run_heading", "table_heading", "to_json", "plain", "FORMATS",
+           "COUNTS", "HEADERS", "headers", "edges_labels", "ranges_labels", "format_aggregate",
+           "draw_breakdowns"]
 
 FORMATS = ("md", "markdown", "csv", "json")
 #: the count columns of a breakdown table: whole numbers, never formatted as a metric
@@ -44,6 +46,32 @@ def plain(value):
 def to_json(doc: dict) -> str:
     """``doc`` as JSON text (NaN and infinite values as null)."""
     return json.dumps(plain(doc), indent=1)
+
+
+# ---------------------------------------------------------------------- a document's labels
+#: the header of every column a breakdown table may have; the document keeps its columns'
+#: headers (and its bins' labels), so that a saved one renders without the task registry
+HEADERS = {"joints": "joints", "crossing": "crossing clips", "mpjpe_mm": "MPJPE (mm)",
+           "pck_0.05": "PCK@0.05 (%)", "pck_auc": "PCK-AUC (%)", "f1": "F1",
+           "precision": "precision", "recall": "recall", "accuracy": "accuracy",
+           "auroc": "AUROC", "ap": "AP"}
+
+
+def headers(*keys) -> dict:
+    """``{key: header}`` of a breakdown table's columns, in the order given."""
+    return {k: HEADERS[k] for k in keys}
+
+
+def edges_labels(edges, unit: str) -> list:
+    """The labels of the half-open bins between ``edges`` (``50-100 px``; the last one,
+    open-ended, ``>= 400 px``)."""
+    return [f">= {lo:g} {unit}" if math.isinf(hi) else f"{lo:g}-{hi:g} {unit}"
+            for lo, hi in zip(edges, edges[1:])]
+
+
+def ranges_labels(ranges) -> list:
+    """The labels of inclusive ``(lo, hi)`` ranges (``3-5``; ``0`` for one value)."""
+    return [str(lo) if lo == hi else f"{lo}-{hi}" for lo, hi in ranges]
 
 
 def _value(formats: dict, key: str, value, missing: str = "–") -> str:

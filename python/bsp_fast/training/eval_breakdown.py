@@ -40,6 +40,7 @@ import torch
 
 from .. import metrics as M
 from ..metrics import ranking
+from ..reporting.breakdown import edges_labels, headers, ranges_labels
 from ..skeleton import HIPS, JOINT_NAMES, NUM_JOINTS
 from .runs import BREAKDOWN_FILE
 from .tasks import get_task
@@ -57,8 +58,7 @@ PCK_ALPHA = 0.05
 #: frames from event - L - 60, so the earliest window ends at event - 61: docs/hdf5-schema.md)
 TTE_BINS = ((30, 39), (40, 49), (50, 61))
 #: classification's summary and time-to-event columns
-CLS_COLUMNS = {"f1": "F1", "precision": "precision", "recall": "recall",
-               "accuracy": "accuracy", "auroc": "AUROC", "ap": "AP", "crossing": "crossing clips"}
+CLS_COLUMNS = headers("f1", "precision", "recall", "accuracy", "auroc", "ap", "crossing")
 #: the values of ``Task.breakdown_scores`` this module collects and groups
 SCORES = ("logits", "joint_error_mm", "pose_pairs")
 
@@ -142,12 +142,6 @@ def _per_frame_values(h5_path, rows: np.ndarray, need_distance: bool) -> dict:
     return out
 
 
-def _edges_label(lo: float, hi: float, unit: str) -> str:
-    if math.isinf(hi):
-        return f">= {lo:g} {unit}"
-    return f"{lo:g}-{hi:g} {unit}"
-
-
 def bin_index(values: np.ndarray, edges) -> np.ndarray:
     """The bin of each value: half-open ``[lo, hi)`` bins between ``edges``; a value below
     the first edge goes to the first bin (a box of negative height cannot occur)."""
@@ -159,10 +153,6 @@ def _missing_index(values: np.ndarray) -> np.ndarray:
     for i, (lo, hi) in enumerate(MISSING_BINS):
         idx[(values >= lo) & (values <= hi)] = i
     return idx
-
-
-def _missing_labels() -> list:
-    return [str(lo) if lo == hi else f"{lo}-{hi}" for lo, hi in MISSING_BINS]
 
 
 # ---------------------------------------------------------------------- groups
@@ -214,7 +204,7 @@ def _cls_stats(score, pred, label) -> dict:
 
 def _tte_table(tte: np.ndarray, stats, bins: dict) -> dict:
     """Clips per :data:`TTE_BINS` bin (and ``other``, only if some clip lies outside)."""
-    labels = [f"{lo}-{hi}" for lo, hi in TTE_BINS]
+    labels = ranges_labels(TTE_BINS)
     index = np.full(len(tte), len(TTE_BINS), np.int64)
     for i, (lo, hi) in enumerate(TTE_BINS):
         index[(tte >= lo) & (tte <= hi)] = i
@@ -224,7 +214,7 @@ def _tte_table(tte: np.ndarray, stats, bins: dict) -> dict:
                              "the event, meta/tte)"}
     cols = {k: v for k, v in CLS_COLUMNS.items() if k != "crossing"}
     table = _table("per time to event", "frames to the event", "clips",
-                   {"crossing": "crossing clips", **cols},
+                   headers("crossing") | cols,
                    _grouped(labels, index, stats), len(tte))
     table["aggregate"] = ["f1", "auroc", "ap"]  # bsp-reproduce --breakdown: mean ± std
     return table
@@ -272,10 +262,11 @@ def _classification(parts, rows, profiles, per_frame, bins) -> dict:
     def stats(mask):
         return _cls_stats(score[mask], pred[mask], label[mask])
 
-    cols = {"crossing": "crossing clips", "f1": "F1", "auroc": "AUROC", "ap": "AP"}
-    h_labels = [_edges_label(a, b, "px") for a, b in zip(HEIGHT_EDGES_PX, HEIGHT_EDGES_PX[1:])]
+    cols = headers("crossing", "f1", "auroc", "ap")
+    h_labels = edges_labels(HEIGHT_EDGES_PX, "px")
     bins["height_px"] = {"rows": h_labels, "per": "clip (mean over its frames)"}
-    bins["missing_joints"] = {"rows": _missing_labels(), "per": "clip (mean per frame, rounded)"}
+    bins["missing_joints"] = {"rows": ranges_labels(MISSING_BINS),
+                              "per": "clip (mean per frame, rounded)"}
     prof, prof_idx = np.unique(np.asarray(profiles, dtype=str), return_inverse=True)
     tables = [
         _table("per pedestrian pixel height", "height", "clips", cols,
@@ -283,7 +274,7 @@ def _classification(parts, rows, profiles, per_frame, bins) -> dict:
         _table("per age/gender profile", "profile", "clips", cols,
                _grouped(prof, prof_idx, stats), N),
         _table("per realised missing-joint count", "missing joints per frame", "clips", cols,
-               _grouped(_missing_labels(), _missing_index(missing), stats), N)]
+               _grouped(ranges_labels(MISSING_BINS), _missing_index(missing), stats), N)]
     if per_frame["tte_problem"] is None:
         tables.append(_tte_table(per_frame["tte"], stats, bins))
     summary = _cls_stats(score, pred, label)
@@ -312,10 +303,10 @@ def _frame_tables(spec, parts, profiles, per_frame, bins, notes) -> dict:
         def stats(mask):
             return _lifting_stats(err[mask])
 
-        cols = {"joints": "joints", "mpjpe_mm": "MPJPE (mm)"}
+        cols = headers("joints", "mpjpe_mm")
         joint_rows = [{"bin": name, "count": F, "mpjpe_mm": float(err[:, j].mean())
                        if F else math.nan} for j, name in enumerate(JOINT_NAMES)]
-        joint_cols = {"mpjpe_mm": "MPJPE (mm)"}
+        joint_cols = headers("mpjpe_mm")
         total_joints = F * NUM_JOINTS
         summary = _lifting_stats(err)
     else:
@@ -325,7 +316,7 @@ def _frame_tables(spec, parts, profiles, per_frame, bins, notes) -> dict:
         def stats(mask):
             return _pck_stats(pred[mask], gt[mask], present[mask])
 
-        cols = {"joints": "joints", "pck_0.05": "PCK@0.05 (%)", "pck_auc": "PCK-AUC (%)"}
+        cols = headers("joints", "pck_0.05", "pck_auc")
         joint_rows = []
         for j, name in enumerate(JOINT_NAMES):
             sel = np.zeros(present.shape, bool)
@@ -333,7 +324,7 @@ def _frame_tables(spec, parts, profiles, per_frame, bins, notes) -> dict:
             c = M.pck_counts(pred, gt, alpha=PCK_ALPHA, norm="bbox", visible=present,
                              select=sel)
             joint_rows.append({"bin": name, "count": c.total, "pck_0.05": c.value})
-        joint_cols = {"pck_0.05": "PCK@0.05 (%)"}
+        joint_cols = headers("pck_0.05")
         summary = _pck_stats(pred, gt, present)
         total_joints = summary["joints"]
     # (bins key, edges, unit, what a frame's value is, title, first column, values)
@@ -343,7 +334,7 @@ def _frame_tables(spec, parts, profiles, per_frame, bins, notes) -> dict:
          "per camera distance", "distance", np.concatenate(distance)) if by_distance else
         ("height_px", HEIGHT_EDGES_PX, "px", "vertical extent of its ground-truth 2D joints",
          "per pedestrian pixel height", "height", height))
-    labels = [_edges_label(a, b, unit) for a, b in zip(edges, edges[1:])]
+    labels = edges_labels(edges, unit)
     bins[key] = {"rows": labels, "per": f"frame ({per})"}
     size_table = _table(title, column, "frames", cols,
                         _grouped(labels, bin_index(values, edges), stats), F)
@@ -354,15 +345,15 @@ def _frame_tables(spec, parts, profiles, per_frame, bins, notes) -> dict:
                          _grouped(prof, prof_idx, stats), F))
     if spec.breakdown_missing_joints:
         missing = _frames(parts, "missing")
-        bins["missing_joints"] = {"rows": _missing_labels(),
+        bins["missing_joints"] = {"rows": ranges_labels(MISSING_BINS),
                                   "per": "frame (joints missing from the input)"}
         tables.append(_table("per realised missing-joint count", "missing joints", "frames",
-                             cols, _grouped(_missing_labels(), _missing_index(missing),
+                             cols, _grouped(ranges_labels(MISSING_BINS), _missing_index(missing),
                                             stats), F))
     else:
         notes.append(f"no missing-joint table: {spec.name}'s inputs are crops, not 2D "
                      "joints with missing ones")
-    summary_cols = {k: v for k, v in cols.items() if k != "joints"} | {"joints": "joints"}
+    summary_cols = {k: v for k, v in cols.items() if k != "joints"} | headers("joints")
     return {"totals": {"clips": N, "frames": F, "joints": int(total_joints)},
             "summary": summary, "tables": tables, "summary_columns": summary_cols,
             "summary_count": "frames"}
