@@ -70,6 +70,19 @@ int main(int argc, char** argv) {
                 r.clips[0] + r.clips[1] + r.clips[2]);
   }
 
+  // Without media and --verify the pose columns are deferred (issue 59): the fill threads
+  // parse them from the file while the calling thread writes, several threads reading the
+  // one file at once. Same clips as with media.
+  {
+    bsp::ConvertOptions o = options(dataset, threads);
+    o.media.enabled = false;
+    o.verify = false;
+    bsp::ConvertProgress progress;
+    const bsp::ConvertReport r = bsp::convert_csv(csv, out + "/deferred.h5", o, &progress);
+    if (r.clips != first.clips) return fail("the deferred conversion planned other clips");
+    std::printf("deferred run: %zu clips\n", r.clips[0] + r.clips[1] + r.clips[2]);
+  }
+
   // Cancelled runs: another thread sets `cancel` once the conversion reaches `stage`
   // (read, check_media, media, ...); convert_csv must join its workers and
   // throw "conversion cancelled" (or finish, when the stage came and went too fast).
