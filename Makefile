@@ -160,6 +160,7 @@ bench: install
 	$(PY) benchmarks/bench_convert_media.py
 	$(PY) benchmarks/bench_loader.py
 	$(PY) benchmarks/bench_synth.py
+	$(PY) benchmarks/bench_synth_poses.py --convert
 	$(PY) benchmarks/bench_metrics.py
 
 clean:
