@@ -84,9 +84,13 @@ def test_converts_without_media_into_pose_datasets(pair, tmp_path):
     labels = np.concatenate([b["label"].numpy() for b in cls.loader(batch_size=64)])
     assert np.bincount(labels, minlength=2).tolist() == [
         report["splits"]["train"]["not-crossing"], report["splits"]["train"]["crossing"]]
-    # With media the converter opens the (absent) video and names it.
-    with pytest.raises(Exception, match=r"clips/.*-0\.mp4"):
-        bf.convert(root / "poses", tmp_path / "m.h5", clip_length=8)
+    # Without media= the dataset's config.yaml (poses_only: true) says there is none;
+    # asking for it names the file and the way out.
+    auto = bf.convert(root / "poses", tmp_path / "a.h5", clip_length=8)
+    assert auto["splits"] == report["splits"] and auto["settings"]["media"] is False
+    assert auto["media"]["why_none"] == "the dataset's config.yaml says poses_only: true"
+    with pytest.raises(ValueError, match=r"config\.yaml says poses_only: true.*--no-media"):
+        bf.convert(root / "poses", tmp_path / "m.h5", clip_length=8, media=True)
 
 
 def test_cli_option_and_checks(tmp_path, capsys):

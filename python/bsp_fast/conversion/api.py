@@ -127,10 +127,12 @@ def conversion_settings(dataset, *, clip_length=None, clip_offset=None, eval_cli
 def _media(root, media):
     """``media`` resolved: None follows the dataset's config.yaml (a ``--poses-only``
     dataset has no MP4/APNG files); asking for the media of such a dataset is an error."""
+    if media is not None and not media:
+        return False  # no media asked for: config.yaml is not read for it
     none = poses_only(root)
     if media is None:
         return not none
-    if media and none:
+    if none:
         raise ValueError(f"{Path(root) / 'config.yaml'} says poses_only: true (the dataset has "
                          "no MP4/APNG files); convert it without the media (--no-media, "
                          "media=False)")
