@@ -16,7 +16,7 @@ guarantees", "House rules a parse can check"):
 * the default seed written as a literal only in ``bsp_fast/defaults.py`` and the C++
   defaults header.
 
-Prints each violation and exits 1 if there is any. ``tests/python/test_house.py`` runs it.
+Prints each violation and exits 1 if there is any. ``tests/python/test_code_rules.py`` runs it.
 """
 from __future__ import annotations
 
