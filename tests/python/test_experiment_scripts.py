@@ -191,27 +191,28 @@ def test_precision_retrain_against_a_published_table_on_its_first_seeds(tmp_path
         pr.main(["--auto", str(bad), "--fp32", str(rerun), *args])
 
 
-def _pose_smoke_table(tmp_path) -> Path:
+@pytest.fixture(scope="module")
+def pose_table(tmp_path_factory) -> Path:
     """Two smoke seeds of the pose table's pose_temporal row (tiny network and crops) on a
-    clip file of 16/8/8 clips; the table's run folder."""
+    clip file of 16/8/8 clips; the table's run folder. Trained once for the module: the
+    scripts below only read it (their outputs go to each test's own folder)."""
     from bsp_fast import reproduction as R
     from bsp_fast.data.testing import write_clip_file
 
+    tmp_path = tmp_path_factory.mktemp("pose_table")
     h5 = tmp_path / "media.h5"
     write_clip_file(h5, clips=(16, 8, 8), clip_length=4, seed=4, media=True)
     assert R.main(["pose_estimation", "--data", str(h5), "--budget", "smoke", "--out",
                    str(tmp_path / "runs"), "--rows", "pose_temporal", "--seeds", "2",
-                   "--set", "crop_size=32", "--set", "hp={width: 4}",
+                   "--jobs", "1", "--set", "crop_size=32", "--set", "hp={width: 4}",
                    # no context frames in this file: no box jitter (nor noisy-box scores)
                    "--set", "box_jitter_scale=0", "--set", "box_jitter_shift=0"]) == 0
     return tmp_path / "runs" / "pose_estimation-smoke"
 
 
-def test_pose_decode_smoke_rescores_the_same_checkpoints(tmp_path):
-    _pose_smoke_table(tmp_path)
+def test_pose_decode_smoke_rescores_the_same_checkpoints(pose_table, tmp_path):
     pd = _load("pose_decode")
-    assert pd.main([str(tmp_path / "runs" / "pose_estimation-smoke"), "--out",
-                    str(tmp_path / "out")]) == 0
+    assert pd.main([str(pose_table), "--out", str(tmp_path / "out")]) == 0
     doc = json.loads((tmp_path / "out" / "pose_decode.json").read_text())
     assert doc["seeds"] == ["22742", "22743"] and doc["reproduced_max_abs"] == 0.0
     one = doc["summary"][0]
@@ -234,8 +235,7 @@ def test_pose_decode_smoke_rescores_the_same_checkpoints(tmp_path):
     real = pd.score
     pd.score = lambda run, d: calls.append((run.name, d)) or real(run, d)
     try:
-        assert pd.main([str(tmp_path / "runs" / "pose_estimation-smoke"), "--out",
-                        str(tmp_path / "out"), "--resume"]) == 0
+        assert pd.main([str(pose_table), "--out", str(tmp_path / "out"), "--resume"]) == 0
     finally:
         pd.score = real
     assert calls == [("seed-22743", "flip")]
@@ -282,10 +282,10 @@ def test_cross_table_difference_by_hand_with_holm(tmp_path):
                  "--out", str(out)])
 
 
-def test_pose_generalisation_smoke_scores_train_val_and_test(tmp_path):
+def test_pose_generalisation_smoke_scores_train_val_and_test(pose_table, tmp_path):
     from bsp_fast.training.evaluate import evaluate
 
-    table = _pose_smoke_table(tmp_path)
+    table = pose_table
     pg = _load("pose_generalisation")
     assert pg.main([str(table), "--out", str(tmp_path / "out")]) == 0
     doc = json.loads((tmp_path / "out" / "pose_generalisation.json").read_text())
