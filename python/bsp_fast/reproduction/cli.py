@@ -72,10 +72,18 @@ def build_parser() -> argparse.ArgumentParser:
                         "OUT/TABLE-BUDGET/protocol.json); the "
                         "mix is recorded in results.json and printed under the table "
                         "(default: refuse, exit 2, nothing written)")
+    _output_options(p)
+    add_options(p)  # --seeds, --split-seeds, --jobs
+    return p
+
+
+def _output_options(p) -> None:
+    """What a call writes besides the table: --publish, --with-published, --breakdown,
+    --estimate."""
     p.add_argument("--publish", metavar="DIR",
                    help="after the report, copy the finished table into DIR (e.g. docs/results): "
                         "TABLE-BUDGET.json, .per_recording.json and .md, which "
-                        "python -m bsp_fast.reproduction.readme renders into the README")
+                        "python -m bsp_fast.reproduction.readme renders into docs/results.md")
     p.add_argument("--with-published", metavar="DIR",
                    help="with --seeds: take the runs that have no run folder here from the "
                         "table published in DIR (e.g. docs/results; trained on another "
@@ -91,8 +99,6 @@ def build_parser() -> argparse.ArgumentParser:
                         "8 CPU hours a quick table must fit on an AVX2-only core (seeds: "
                         "--seeds N, else the table file's registered count; "
                         "docs/reproduce.md, 'Estimate')")
-    add_options(p)  # --seeds, --split-seeds, --jobs
-    return p
 
 
 def parse_set(items) -> dict:
