@@ -23,7 +23,7 @@ PARTS = ".parts"
 
 def _clip_job(cfg: SynthConfig, index: int, root: str, threads: int) -> dict:
     """Makes clip `index` under `root`; returns its statistics (runs in a worker)."""
-    from .. import csvio
+    from ..csvio import write_csv
     from . import clip as cl
     from . import motion as mo
 
@@ -37,7 +37,7 @@ def _clip_job(cfg: SynthConfig, index: int, root: str, threads: int) -> dict:
     else:
         visible = cl.render_clip(cp, cfg, per_frame, os.path.join(root, "clips"), threads)
     cols = cl.csv_columns(cp, cfg, per_frame, visible)
-    csvio.write_csv(os.path.join(root, PARTS, f"{index:06d}.csv"), cols,
+    write_csv(os.path.join(root, PARTS, f"{index:06d}.csv"), cols,
                     threads=1 if threads == 1 else None)
     annotated = per_frame["annotated"]
     return {
@@ -146,7 +146,7 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
     annotated_frames, crossing_clips}}, seconds, clips_per_second, ids, seed, preset,
     poses_only.
     """
-    from .. import __version__
+    from .._version import __version__
 
     t0 = time.perf_counter()
     out_dir = os.path.abspath(os.fspath(out_dir))
