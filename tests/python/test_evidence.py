@@ -273,7 +273,7 @@ def test_bf16_metrics_stay_within_tolerance_of_fp32(data, task, name, metric):
 def test_seeds_smoke_run_gives_per_seed_values_intervals_and_marks(data, tmp_path, capsys):
     argv = ["classification", "--data", str(data["classification"]), "--budget", "smoke",
             "--out", str(tmp_path), "--rows", "lstm-perfect,graph-perfect", "--seeds", "2",
-            "--jobs", "2"]
+            "--jobs", "1"]  # in this process (the worker processes: test_reproduce_worker.py)
     assert R.main(argv) == 0
     text = capsys.readouterr().out
     base = tmp_path / "classification-smoke"
@@ -336,8 +336,10 @@ def test_seeds_options_are_checked(data, tmp_path, capsys):
     assert "--split-seeds needs a dataset directory" in capsys.readouterr().err
 
 
+#: two batches of 4 clips (the full budgets' batches of 256 would be one batch of every
+#: train clip of these files, and the full-size PoseFormer's cost grows with it)
 FULL_ON_CPU = {"accelerator": "cpu", "limit_batches": 2, "epochs": 1, "max_steps": 2,
-               "precision": "32", "threads": 1, "workers": 0}
+               "batch_size": 4, "precision": "32", "threads": 1, "workers": 0}
 
 
 @pytest.mark.parametrize("table", R.TABLES)
