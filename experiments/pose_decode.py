@@ -37,15 +37,19 @@ DECODES = {"soft_argmax": {"decode": "soft_argmax", "flip_test": False},
 LABELS = {"soft_argmax": "soft-argmax", "dark": "DARK", "flip": "soft-argmax + flip"}
 
 
-def _decode_callback(decode: str):
-    import lightning.pytorch as pl
+class _SetDecode:
+    """An observer of bsp-eval's scoring (evaluate(observers=...)): sets the decoding on
+    the trained network before the first batch is scored."""
 
-    class SetDecode(pl.Callback):
-        def on_test_start(self, trainer, pl_module):
-            for key, value in DECODES[decode].items():
-                setattr(pl_module.net, key, value)
+    def __init__(self, decode: str):
+        self.decode = decode
 
-    return SetDecode()
+    def start(self, spec, net) -> None:
+        for key, value in DECODES[self.decode].items():
+            setattr(net, key, value)
+
+    def update(self, spec, net, output, batch) -> None:
+        pass
 
 
 def _own_decode(run: Path) -> str:
@@ -62,7 +66,7 @@ def score(run: Path, decode: str) -> dict:
     from bsp_fast.training.evaluate import evaluate
 
     t = time.process_time()
-    res = evaluate(run, "test", callbacks=[_decode_callback(decode)])
+    res = evaluate(run, "test", observers=[_SetDecode(decode)])
     return {"metrics": res.metrics, "per_recording": res.per_recording,
             "cpu_s": round(time.process_time() - t, 1)}
 

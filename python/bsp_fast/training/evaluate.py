@@ -122,7 +122,8 @@ def evaluate(run, split: str = "test", data=None, *, which: str = "best",
     (pose_estimation) scores the crops of noisy boxes instead: side x U[1 - scale,
     1 + scale], centre moved by U[-shift, shift] x side per axis, fixed per clip by the
     evaluation seed (docs/data.md, "Box noise"). ``observers``: objects whose
-    ``update(spec, net, output, batch)`` sees every scored batch."""
+    ``update(spec, net, output, batch)`` sees every scored batch and whose
+    ``start(spec, net)``, where they have one, runs before the first."""
     if split not in SPLIT_STAGES:
         raise ValueError(f"split must be one of {list(SPLIT_STAGES)}, got {split!r}")
     saved, cfg, ckpt, h5 = load_run(run, which, data, batch_size=batch_size, workers=workers,

@@ -141,9 +141,13 @@ def score(saved: SavedModel, loader, precision: str, device, *, per_recording: b
     """Scores every batch of ``loader`` (the first ``limit``): ``{"metrics",
     "per_recording", "clips", "recordings"}``. ``observers``: objects whose
     ``update(spec, net, output, batch)`` sees every scored batch (e.g. the breakdown's
-    collector)."""
+    collector) and whose ``start(spec, net)``, where they have one, runs before the first
+    (e.g. a decoding to score the net with)."""
     import torch
 
+    for observer in observers:
+        if callable(getattr(observer, "start", None)):
+            observer.start(saved.spec, saved.net)
     saved.net.to(device)
     metrics = TaskMetrics(saved.task).to(device)
     recordings = RecordingBreakdown(saved.task) if per_recording else None
