@@ -261,6 +261,8 @@ def test_smoke_run_prints_table_and_consistent_marks(table, data, tmp_path, caps
         argv += ["--rows", SMOKE_ROWS[table]]
     if table == "pose_estimation":
         argv += ["--set", "crop_size=32", "--set", "hp={width: 4, hidden: 16}"]
+    if table == "lifting":  # the full-size PoseFormer: 2 batches of 4 clips, not of 16
+        argv += ["--set", "batch_size=4"]
     assert R.main(argv) == 0
     text = capsys.readouterr().out
     tab = R.load_table(table)

@@ -360,8 +360,9 @@ def test_published_table_renders_into_its_readme_section(finished, monkeypatch):
 def two_seeds(finished):
     """The tiny table with two seeds, published (the runs of "another machine")."""
     root = finished["root"] / "two-seeds"
+    # --jobs 1: the seeds trained in this process (worker processes: test_reproduce_worker)
     code, _, err = _main(finished["argv"][:-2] + ["--out", root / "runs", "--seeds", "2",
-                                                  "--publish", root / "results"])
+                                                  "--jobs", "1", "--publish", root / "results"])
     assert code == 0, err
     return root
 
@@ -398,7 +399,7 @@ def test_with_published_trains_only_the_missing_seeds(finished, two_seeds):
     the published numbers unchanged."""
     other = finished["root"] / "other-machine"
     published = json.loads((two_seeds / "results" / "tiny_ae-smoke.json").read_text())
-    argv = finished["argv"][:-2] + ["--out", other / "runs", "--seeds", "3"]
+    argv = finished["argv"][:-2] + ["--out", other / "runs", "--seeds", "3", "--jobs", "1"]
     code, text, err = _main(argv + ["--with-published", two_seeds / "results",
                                     "--publish", other / "results"])
     assert code == 0, err
