@@ -2,6 +2,8 @@
 segmentation colours, MP4 frame counts, the 3D and predictions views, exit codes."""
 from __future__ import annotations
 
+import re
+
 import h5py
 import numpy as np
 import pytest
@@ -296,3 +298,21 @@ def test_lifting_predictions_front_and_side_without_piled_up_depth_labels(sample
                 assert not any(texts) and getattr(ax, f"get_{name}label")() == ""
             else:
                 assert sum(bool(t) for t in texts) >= 3, (name, texts)
+
+
+def test_preview_frames_counts_the_frames_the_picture_shows(tmp_path, capsys):
+    pytest.importorskip("cv2")
+    from bsp_fast.preview.cli import main
+    from bsp_fast.synth import generate
+
+    ds = tmp_path / "ds"
+    generate(ds, "sample", clips=2, frames=150, size="320x120", seed=1, workers=1,
+             progress=False)
+    out = tmp_path / "x.png"
+    assert main(["frames", str(ds), "--recording", "0", "--frames", "60,140",
+                 "--out", str(out)]) == 0
+    assert re.fullmatch(rf"wrote {re.escape(str(out))} \(\d+x\d+, 2 frame\(s\)\)\n",
+                        capsys.readouterr().out)
+    assert main(["frames", str(ds), "--recording", "0", "--frames", "10:40:10",
+                 "--out", str(tmp_path / "y.mp4")]) == 0
+    assert "3 frame(s)" in capsys.readouterr().out  # MP4: one video frame each
