@@ -257,7 +257,7 @@ TOLERANCE = {"classification": ("loss", dict(rel=0.02)),
 def test_bf16_metrics_stay_within_tolerance_of_fp32_for_every_model(tmp_path, task, name):
     """The probe may pick bf16 for any model (here: all of them on a CPU with native bf16);
     each stays within the stated tolerance of float32 (baseline_3d and simple_transformer:
-    test_evidence.py)."""
+    test_precision_choice.py)."""
     import torch
 
     from bsp_fast import models

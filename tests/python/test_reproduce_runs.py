@@ -1,8 +1,7 @@
-"""Evidence, not anecdotes: the bootstrap over test recordings and the paired marks on
-cases with known answers, root-relative N-MPJPE in every lifting target space, PoseFormer
-scored on every frame, bf16 against fp32, --seeds smoke runs, and every table's `full`
-rows run for two batches on the CPU (so a GPU user's first run does not fail on a config
-error)."""
+"""bsp-reproduce's runs: a --seeds smoke run's per-seed values, intervals and marks (and
+its --breakdown over seeds), the options checked, every table's `full` rows run for two
+batches on the CPU (so a GPU user's first run does not fail on a config error),
+--split-seeds, the budget rule, and a seeds table's cells and breakdown bins by hand."""
 from __future__ import annotations
 
 import json
@@ -12,21 +11,11 @@ import re
 import h5py
 import numpy as np
 import pytest
-import torch
 
-from bsp_fast import metrics as M
-from bsp_fast import models
-from bsp_fast.data import ClipDataset
 from bsp_fast.data.testing import write_clip_file
-from bsp_fast.metrics import hierarchical as H
-from bsp_fast.metrics import uncertainty as U
-from bsp_fast.skeleton import HIPS
 from bsp_fast.reproduction import evidence as E
 from bsp_fast import reproduction as R
-from bsp_fast.reporting.reproduced import format_table
 from bsp_fast.reproduction import runner as S
-from bsp_fast.training.scoring import TaskMetrics
-from bsp_fast.training.precision import resolve_precision
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -44,229 +33,6 @@ def data(tmp_path_factory):
     with h5py.File(files["classification"], "a") as f:
         f.attrs["benchmark"] = 1
     return files
-
-
-# ---------------------------------------------------------------------- statistics
-def _recordings(n=30, seed=0):
-    rng = np.random.default_rng(seed)
-    den = rng.integers(10, 60, n).astype(float)  # joints per recording
-    return rng.uniform(40, 160, n) * den, den   # error sums: 40-160 mm per joint
-
-
-def test_identical_runs_are_inconclusive():
-    a = _recordings()
-    iv = U.paired_interval([a, a], lambda v: v[0] - v[1])
-    assert (iv.value, iv.low, iv.high, iv.n) == (0.0, 0.0, 0.0, 30)
-    assert U.mark(iv, 1) == U.mark(iv, -1) == "inconclusive"
-
-
-def test_a_constant_shift_is_reproduced_and_the_opposite_claim_is_not():
-    num, den = _recordings()
-    worse = (num + 5.0 * den, den)  # 5 mm more on every joint of every recording
-    iv = U.paired_interval([worse, (num, den)], lambda v: v[0] - v[1])
-    assert iv.value == pytest.approx(5.0) and iv.low == pytest.approx(5.0)
-    assert iv.high == pytest.approx(5.0)
-    assert U.mark(iv, 1) == "reproduced" and U.mark(iv, -1) == "not reproduced"
-    # unpaired, the recordings' own spread (40-160 mm) would swamp the 5 mm
-    a, b = U.ratio_interval(*worse), U.ratio_interval(num, den)
-    assert a.low < b.high
-
-
-def test_ratio_interval_matches_the_normal_approximation():
-    # 400 recordings of one joint each, errors N(3, 2): 95 % interval about 3 +- 1.96 * 2 / 20
-    x = np.random.default_rng(1).normal(3.0, 2.0, 400)
-    iv = U.ratio_interval(x, np.ones(400))
-    assert iv.value == pytest.approx(x.mean())
-    assert (iv.high - iv.low) / 2 == pytest.approx(1.96 * x.std() / 20, rel=0.15)
-    assert iv.low < iv.value < iv.high
-
-
-def test_pool_sums_the_seeds_of_a_recording_and_align_keeps_common_recordings():
-    s1 = {"recordings": ["a", "b"], "metrics": {"m": {"num": [1.0, 2.0], "den": [1, 1]}}}
-    s2 = {"recordings": ["b", "c"], "metrics": {"m": {"num": [4.0, 8.0], "den": [2, 2]}}}
-    recs, num, den = U.pool([s1, s2], "m")
-    assert recs == ["a", "b", "c"] and num.tolist() == [1, 6, 8] and den.tolist() == [1, 3, 2]
-    common, rows = U.align([(recs, num, den), (["c", "b"], np.array([1.0, 2]), np.ones(2))])
-    assert common == ["b", "c"] and rows[1][0].tolist() == [2, 1] and rows[0][0].tolist() == [6, 8]
-    with pytest.raises(ValueError, match="allowed: m"):
-        U.pool([s1], "f1")
-
-
-def test_bad_arguments_and_degenerate_cases():
-    one = U.ratio_interval([3.0], [1.0])  # one recording: nothing to resample
-    assert one.value == 3.0 and np.isnan(one.low) and U.mark(one) == "inconclusive"
-    assert U.ratio([0.0, 0.0], [0.0, 0.0], empty=0.0) == 0.0
-    with pytest.raises(ValueError, match=r"side must be one of \[1, -1\]"):
-        U.mark(one, 0)
-    with pytest.raises(ValueError, match="confidence must lie in"):
-        U.ratio_interval([1.0, 2.0], [1.0, 1.0], confidence=95)
-    with pytest.raises(ValueError, match="same length"):
-        U.paired_interval([([1.0, 2.0], [1.0])], lambda v: v[0])
-    assert U.combine_marks(["reproduced", "inconclusive"]) == "inconclusive"
-    assert U.combine_marks(["reproduced", "not reproduced"]) == "not reproduced"
-    assert U.combine_marks(["reproduced"] * 3) == "reproduced"
-
-
-def _fake_results(tmp_path, table: dict, per_row: dict) -> dict:
-    """Results of five seeds per row (the fewest a mark accepts) whose per-recording error
-    sums are ``per_row[row]`` (the same for every seed) with 40 recordings."""
-    rng = np.random.default_rng(5)
-    den = rng.integers(10, 60, 40).astype(float)
-    recs = [f"rec{i}/0_0" for i in range(40)]
-    out = {"table": table["table"], "budget": "smoke", "seeds": [1, 2, 3, 4, 5], "results": {}}
-    for row, per_joint in per_row.items():
-        seeds = {}
-        for seed in ("1", "2", "3", "4", "5"):
-            path = tmp_path / f"{row}-{seed}.json"
-            sec = {"recordings": recs, "metrics": {m: {"num": (per_joint * den).tolist(),
-                                                       "den": den.tolist()}
-                                                   for m in table["metrics"]}}
-            path.write_text(json.dumps({"test": sec, "initial": sec, "empty": {}}))
-            value = float((per_joint * den).sum() / den.sum())
-            seeds[seed] = {"metrics": {m: value for m in table["metrics"]},
-                           "initial": {m: value for m in table["metrics"]},
-                           "per_recording": str(path), "epochs": 1, "best_epoch": 1}
-        out["results"][row] = {"seeds": seeds, "source": "test"}
-    return E.summarise(table, out)
-
-
-def test_findings_marks_on_known_cases(tmp_path):
-    tab = R.load_table("lifting")
-    base = np.random.default_rng(2).uniform(40, 160, 40)
-    rows = ["poseformer", "lstm", "baseline_3d", "lstm_relative_rot"]
-    # each 10 mm worse, give or take a recording's 1 mm (every seed the same: the
-    # differences vary by recording only)
-    jit = {r: np.random.default_rng(10 + i).normal(0, 1.0, 40) for i, r in enumerate(rows)}
-    ordered = {r: base + 10.0 * i + jit[r] for i, r in enumerate(rows)}
-    found = E.evaluate_findings(tab, _fake_results(tmp_path, tab, ordered))
-    assert [f["status"] for f in found[:2]] == ["reproduced", "reproduced"]
-    d = found[0]["difference"]  # first pair, lower is better
-    assert d == pytest.approx(-10.0, abs=0.5) and -11 < found[0]["interval"][0] < d
-    assert found[0]["interval_seeds"] == pytest.approx([d, d])  # the seeds agree
-    # identical rows: a difference of 0 with no variance, inconclusive by the stated rule
-    same = E.evaluate_findings(tab, _fake_results(tmp_path, tab, {r: base for r in rows}))
-    assert [f["status"] for f in same] == ["inconclusive"] * 3
-    assert same[0]["rule"] == H.ZERO_SE
-    swapped = dict(ordered, poseformer=base + 15.0)  # PoseFormer now worse than the LSTM
-    assert E.evaluate_findings(tab, _fake_results(tmp_path, tab, swapped))[0]["status"] == \
-        "not reproduced"
-    # a drop with the report's size: its interval inside report ± equivalence margin
-    ae = R.load_table("autoencoder")
-    clean = np.random.default_rng(3).uniform(0.8, 1.0, 40)
-    wobble = np.random.default_rng(4).normal(0, 0.005, 40)
-    res = _fake_results(tmp_path, ae, {"clean": clean, "noisy": clean - 0.1 + wobble})
-    drop = E.evaluate_findings(ae, res)[1]
-    assert drop["status"] == "reproduced" and "size agrees with the report's 10.0" in drop["ours"]
-    res = _fake_results(tmp_path, ae, {"clean": clean, "noisy": clean - 0.3 + wobble})
-    assert "size differs from the report's 10.0 p.p. ± 5.0" in \
-        E.evaluate_findings(ae, res)[1]["ours"]
-    table = format_table(ae, res, E.evaluate_findings(ae, res))
-    assert re.search(r"\| clean \| .* \| \d+\.\d ± 0\.0 \[\d+\.\d, \d+\.\d\] \|", table)
-
-
-def test_budget_rule_is_checked():
-    tab = R.load_table("lifting")
-    S.check_budget_rule(tab)
-    bad = dict(tab, rows=[dict(tab["rows"][1], budgets={"quick": {"epochs": 3}})])
-    with pytest.raises(ValueError, match="row 'lstm' sets 'epochs' for budget 'quick'"):
-        S.check_budget_rule(bad)
-    bad = dict(tab, rows=[dict(tab["rows"][1], budgets={"quick": {"batch_size": 8}})])
-    with pytest.raises(ValueError, match="own_batch_size"):
-        S.check_budget_rule(bad)
-    with pytest.raises(ValueError, match="missing key 'budget_rule'"):
-        S.check_budget_rule({k: v for k, v in tab.items() if k != "budget_rule"})
-    for name in R.TABLES:  # every table: one rule, with a patience and a cap of updates
-        t = R.load_table(name)
-        for budget in ("quick", "full"):
-            assert t["budgets"][budget]["early_stop"] > 0 and t["budgets"][budget]["max_steps"] > 0
-
-
-# ---------------------------------------------------------------------- metrics
-@pytest.mark.parametrize("space", ["absolute", "world", "camera"])
-def test_scaled_about_the_hips_has_zero_n_mpjpe_in_every_lifting_target_space(data, space):
-    ds = ClipDataset(data["lifting"], "test", "lifting", lifting_target=space)
-    b = ds[:6]
-    gt = b["targets_m"].double() * 1000
-    hips = gt[..., HIPS:HIPS + 1, :]
-    pred = hips + 1.1 * (gt - hips)
-    assert float(M.n_mpjpe(pred, gt)) == pytest.approx(0.0, abs=1e-9)
-    assert float(M.mpjpe(pred, gt)) > 1.0
-    # the scoring path: any multiple of the normalised target is a pose scaled about the
-    # hips once de-normalised, so N-MPJPE is 0 and never above MPJPE
-    tm = TaskMetrics("lifting")
-    tm.update(1.1 * b["targets"], b, models.create("lifting", "lstm"))
-    out = tm.compute()
-    assert out["n_mpjpe_mm"] == pytest.approx(0.0, abs=1e-3)
-    assert out["n_mpjpe_mm_centre"] == pytest.approx(0.0, abs=1e-3)
-    assert out["mpjpe_mm"] > 1.0
-    if space == "world":  # scaled about the origin instead, the world offset shows
-        p, g = pred.numpy(), gt.numpy()
-        s = (p * g).sum((-1, -2)) / (p * p).sum((-1, -2))
-        assert np.linalg.norm(s[..., None, None] * p - g, axis=-1).mean() > 1.0
-
-
-def test_poseformer_is_scored_on_every_frame_like_the_other_models(data):
-    b = ClipDataset(data["lifting"], "test", "lifting")[:4]
-    counts = {}
-    for name, hp in (("poseformer", dict(embed_dim_ratio=8, depth=1)), ("lstm", {})):
-        torch.manual_seed(0)
-        m = models.create("lifting", name, **hp).eval()
-        with torch.no_grad():
-            out = m.forward_batch(b)
-        assert out.shape == (4, 16, 26, 3)
-        tm = TaskMetrics("lifting")
-        tm.update(out, b, m)
-        counts[name] = (int(tm.scores["mpjpe_mm"].count),
-                        int(tm.scores["mpjpe_mm_centre"].count))
-    assert counts["poseformer"] == counts["lstm"] == (4 * 16 * 26, 4 * 8 * 26)
-    pf = models.create("lifting", "poseformer", embed_dim_ratio=8, depth=1)
-    assert pf.centre_slice(16) == slice(4, 12) and pf.frame_slice(16) == slice(0, 16)
-
-
-# ---------------------------------------------------------------------- precision
-def test_precision_auto_follows_the_per_model_decision(monkeypatch):
-    import bsp_fast.models.lstm as lstm_module
-
-    cls = {n: models.model_class(t, n) for t, n in (("lifting", "baseline_3d"),
-                                                    ("autoencoder", "simple_transformer"),
-                                                    ("lifting", "lstm"),
-                                                    ("lifting", "poseformer"))}
-    native = bool(re.search(r"avx512_bf16|amx_bf16", open("/proc/cpuinfo").read()))
-    if not native:  # this machine: bf16 is emulated, auto is fp32 for every model
-        assert {resolve_precision("auto", "cpu", c) for c in cls.values()} == {"32"}
-    monkeypatch.setattr(lstm_module, "cpu_bf16", lambda: True)
-    got = {n: resolve_precision("auto", "cpu", c) for n, c in cls.items()}
-    assert got == {"baseline_3d": "bf16-mixed", "simple_transformer": "bf16-mixed",
-                   "lstm": "32", "poseformer": "32"}
-    assert resolve_precision("32", "cpu", cls["baseline_3d"]) == "32"
-    monkeypatch.setattr(lstm_module, "cpu_bf16", lambda: False)
-    assert resolve_precision("auto", "cpu", cls["baseline_3d"]) == "32"
-
-
-#: bf16 autocast against float32 on the same weights and clips: relative tolerance of an
-#: error in mm; a PCK is a share of joints, and bf16 rounding moves a few joints across the
-#: threshold (on a CPU with native bf16, 0.0075 vs 0.0074 here): an absolute tolerance of
-#: 0.5 percentage points of the joints
-BF16_TOLERANCE = {"mpjpe_mm": dict(rel=0.02), "pck_0.05": dict(abs=0.005)}
-
-
-@pytest.mark.parametrize("task,name,metric", [("lifting", "baseline_3d", "mpjpe_mm"),
-                                              ("autoencoder", "simple_transformer",
-                                               "pck_0.05")])
-def test_bf16_metrics_stay_within_tolerance_of_fp32(data, task, name, metric):
-    assert models.model_class(task, name).cpu_bf16_faster
-    ds = ClipDataset(data[task], "test", task, noise=5.0)
-    b = ds[:8]
-    torch.manual_seed(0)
-    m = models.create(task, name).eval()
-    values = {}
-    for bf16 in (False, True):
-        with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-            out = m.forward_batch(b)
-        tm = TaskMetrics(task)
-        tm.update(out, b, m)
-        values[bf16] = tm.compute()[metric]
-    assert values[True] == pytest.approx(values[False], **BF16_TOLERANCE[metric])
 
 
 # ---------------------------------------------------------------------- runs
@@ -443,33 +209,18 @@ def test_table_breakdown_aggregates_bins_over_seeds_by_hand():
     assert "| hips | 12.00 ± 2.83 (n 10) | 20.00 (n 10) |" in md
 
 
-def test_rows_of_different_datasets_are_resampled_independently():
-    num, den = _recordings(30, seed=3)
-    other = _recordings(24, seed=4)  # another dataset: other recordings, other count
-    # one group is the paired bootstrap itself
-    one = U.grouped_interval([[(num, den), (num + 5 * den, den)]], lambda v: v[1] - v[0])
-    assert one == U.paired_interval([(num, den), (num + 5 * den, den)], lambda v: v[1] - v[0])
-    two = U.grouped_interval([[(num, den)], [other]], lambda v: v[1] - v[0])
-    assert two.value == pytest.approx(other[0].sum() / other[1].sum() - num.sum() / den.sum())
-    assert two.low < two.value < two.high and two.n == 24
-    # a dataset against itself shifted by a constant: unpaired, so the interval is wide
-    shifted = U.grouped_interval([[(num, den)], [(num + 5 * den, den)]], lambda v: v[1] - v[0])
-    assert shifted.value == pytest.approx(5.0) and shifted.high - shifted.low > 1.0
-    # the two-level bootstrap the marks use: the recordings of one dataset are drawn once
-    # for its rows (a constant shift on it: zero width), of another independently
-    from bsp_fast.metrics.hierarchical import two_level
-
-    rows = [(np.tile(other[0], (5, 1)), np.tile(other[1], (5, 1))),
-            (np.tile(num, (5, 1)), np.tile(den, (5, 1))),
-            (np.tile(other[0] + 2 * other[1], (5, 1)), np.tile(other[1], (5, 1)))]
-    for method in ("t", "vc"):  # no variance: no p (never 0 from a standard error of 0)
-        iv = two_level(rows, lambda v: v[2] - v[0] + 0 * v[1], groups=["b", "a", "b"],
-                       method=method)
-        assert iv.value == pytest.approx(2.0) and iv.high - iv.low < 1e-9
-        assert np.isnan(iv.p) and iv.se == pytest.approx(0.0, abs=1e-9)
-        iv = two_level(rows, lambda v: v[1] - v[0], groups=["b", "a", "b"], method=method)
-        assert iv.high - iv.low > 1.0
-    with pytest.raises(ValueError, match="aligned on the same recordings"):
-        two_level(rows, lambda v: v[1] - v[0])  # 24 and 30 recordings, one dataset
-    with pytest.raises(ValueError, match="1-d arrays of one length"):
-        U.grouped_interval([[(num, den[:-1])]], lambda v: v[0])
+def test_budget_rule_is_checked():
+    tab = R.load_table("lifting")
+    S.check_budget_rule(tab)
+    bad = dict(tab, rows=[dict(tab["rows"][1], budgets={"quick": {"epochs": 3}})])
+    with pytest.raises(ValueError, match="row 'lstm' sets 'epochs' for budget 'quick'"):
+        S.check_budget_rule(bad)
+    bad = dict(tab, rows=[dict(tab["rows"][1], budgets={"quick": {"batch_size": 8}})])
+    with pytest.raises(ValueError, match="own_batch_size"):
+        S.check_budget_rule(bad)
+    with pytest.raises(ValueError, match="missing key 'budget_rule'"):
+        S.check_budget_rule({k: v for k, v in tab.items() if k != "budget_rule"})
+    for name in R.TABLES:  # every table: one rule, with a patience and a cap of updates
+        t = R.load_table(name)
+        for budget in ("quick", "full"):
+            assert t["budgets"][budget]["early_stop"] > 0 and t["budgets"][budget]["max_steps"] > 0
