@@ -13,8 +13,7 @@
 # per wheel, "VERSION PATH", last. Incremental: a second run compiles only what changed.
 #
 # Each Python has its own build directory, and none is build/wheel (`make install`'s): a
-# CMake build directory holds one interpreter's paths, and scikit-build-core clears it
-# when another interpreter builds there.
+# build directory's CMake cache holds one interpreter's paths, so each stays incremental.
 #
 # Where ccache is on PATH it is the compilers' launcher: the core's objects (38 of the 46)
 # do not depend on the Python, so the second and later interpreters compile only the 8
@@ -45,15 +44,18 @@ fi
 find_python() {
   local want=$1 candidate
   local pyenv_root=${PYENV_ROOT:-$HOME/.pyenv}
-  for candidate in "$(command -v "python$want" || true)" \
-      $(ls -d "$pyenv_root"/versions/"$want".*/bin/"python$want" 2>/dev/null | sort -rV); do
-    if [ -n "$candidate" ] && [ "$("$candidate" -c 'import sys; print("%d.%d" % sys.version_info[:2])' \
-        2>/dev/null)" = "$want" ]; then
+  local says='import sys; print("%d.%d" % sys.version_info[:2])'
+  local candidates=("$(command -v "python$want" || true)")
+  candidates+=($(ls -d "$pyenv_root"/versions/"$want".*/bin/"python$want" 2>/dev/null |
+                 sort -rV))
+  for candidate in "${candidates[@]}"; do
+    if [ -n "$candidate" ] && [ "$("$candidate" -c "$says" 2>/dev/null)" = "$want" ]; then
       echo "$candidate"
       return
     fi
   done
-  echo "build_wheels: no CPython $want (neither python$want on PATH nor in $pyenv_root/versions)" >&2
+  echo "build_wheels: no CPython $want (no python$want on PATH, none in" \
+       "$pyenv_root/versions)" >&2
   return 1
 }
 

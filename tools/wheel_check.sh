@@ -28,8 +28,9 @@
 #    (preview: a bsp-preview contact sheet). Where torch is installed (WHEEL_CHECK_EXTRAS
 #    naming `torch`), a one-epoch bsp-train on the sample.
 #
-# WHEEL_CHECK_SUMMARY=FILE: the measurements (wheel size, install times, venv sizes, the
-# torch installed) as KEY=VALUE lines in FILE, for tools/wheel_matrix.sh's table.
+# WHEEL_CHECK_SHOW=FILE: `auditwheel show` of WHEEL as saved by its build, read instead of
+# running it again. WHEEL_CHECK_SUMMARY=FILE: the measurements (wheel size, install times,
+# venv sizes, the torch installed) as KEY=VALUE lines in FILE, for tools/wheel_matrix.sh.
 set -euo pipefail
 GIVEN=${1:+$(readlink -f "$1")}
 cd "$(dirname "$0")/.."
@@ -54,7 +55,12 @@ TOOLS=$(pwd)/build/wheel-tools
 t_built=$SECONDS
 
 # ---------------------------------------------------------------- 1. auditwheel show
-"$TOOLS/bin/auditwheel" show "$WHEEL" > "$WORK/show.txt" 2>&1
+# (WHEEL_CHECK_SHOW: tools/wheel_matrix.sh passes the one tools/build_wheels.sh saved)
+if [ -n "${WHEEL_CHECK_SHOW:-}" ]; then
+  cp "$WHEEL_CHECK_SHOW" "$WORK/show.txt"
+else
+  "$TOOLS/bin/auditwheel" show "$WHEEL" > "$WORK/show.txt" 2>&1
+fi
 echo "wheel_check: auditwheel show $(basename "$WHEEL"):"
 sed -n -e '/is consistent/,/^$/p' -e '/This constrains/,/^$/p' "$WORK/show.txt"
 "$TOOLS/bin/python" - "$WHEEL" "$WORK/show.txt" "$WORK/summary" <<'PYEOF'

@@ -33,16 +33,17 @@ export WHEEL_CHECK_EXTRAS=${WHEEL_CHECK_EXTRAS-torch,preview}
 check_one() {
   local version=$1
   local dir=build/wheels/cp${version/./}
-  local wheel
+  local wheel show=
   mkdir -p "$dir"
   rm -f "$dir/summary.txt"
   if [ -n "$BUILD" ]; then
     bash tools/build_wheels.sh "$version" 2>&1 | tee "$dir/build.log" || return 1
+    show=$dir/show.txt  # build_wheels.sh's `auditwheel show` of the wheel it just made
   fi
   wheel=$(ls dist/bsp_fast-*-cp${version/./}-cp${version/./}-manylinux*.whl 2>/dev/null) ||
     { echo "wheel_matrix: $version: no wheel in dist/ (make wheels)" >&2; return 1; }
-  WHEEL_CHECK_SUMMARY=$dir/summary.txt bash tools/wheel_check.sh "$wheel" "$dir/env/bin/python" \
-    2>&1 | tee "$dir/check.log"
+  WHEEL_CHECK_SHOW=$show WHEEL_CHECK_SUMMARY=$dir/summary.txt \
+    bash tools/wheel_check.sh "$wheel" "$dir/env/bin/python" 2>&1 | tee "$dir/check.log"
 }
 
 failed=()
