@@ -131,21 +131,33 @@ def test_initial_metrics_are_the_trivial_baselines(runs, data):
     assert ae["test"]["pck_0.05"] == 1.0 and ae["test"]["pckhn_0.1"] == 1.0
 
 
+@pytest.fixture(scope="module")
+def scored_apart(runs):
+    """bsp-eval's scores of every task's run, one after the other in one fresh process:
+    ``{task: {task, split, metrics, per_recording, lightning}}``, ``lightning`` whether
+    Lightning had been imported once that run was scored (one process, not four: each
+    start imports PyTorch)."""
+    code = ("import json, sys\n"
+            "from bsp_fast.training.evaluate import evaluate\n"
+            "for run in sys.argv[1:]:\n"
+            "    r = evaluate(run)\n"
+            "    print('scored', json.dumps({'task': r.task, 'split': r.split,\n"
+            "          'metrics': r.metrics, 'per_recording': r.per_recording,\n"
+            "          'lightning': 'lightning' in sys.modules}), flush=True)")
+    out = subprocess.run([sys.executable, "-c", code, *(str(runs[t].run_dir) for t in TINY)],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    lines = [ln.split(" ", 1)[1] for ln in out.stdout.splitlines() if ln.startswith("scored ")]
+    assert len(lines) == len(TINY), out.stdout
+    return dict(zip(TINY, map(json.loads, lines)))
+
+
 @pytest.mark.parametrize("task", list(TINY))
-def test_eval_reproduces_metrics_json(runs, task):
+def test_eval_reproduces_metrics_json(runs, scored_apart, task):
     """bsp-eval scores in plain PyTorch: Trainer.test's numbers (metrics.json and the
     per-recording sums) to the last digit, without importing Lightning."""
     run = runs[task].run_dir
-    code = ("import json, sys\n"
-            "from bsp_fast.training.evaluate import evaluate\n"
-            "r = evaluate(sys.argv[1])\n"
-            "print(json.dumps({'task': r.task, 'split': r.split, 'metrics': r.metrics,\n"
-            "                  'per_recording': r.per_recording,\n"
-            "                  'lightning': 'lightning' in sys.modules}))")
-    out = subprocess.run([sys.executable, "-c", code, str(run)], capture_output=True,
-                         text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    res = json.loads(out.stdout.splitlines()[-1])
+    res = scored_apart[task]
     assert res["task"] == task and res["split"] == "test" and not res["lightning"]
     assert res["metrics"] == json.loads((run / "metrics.json").read_text())["test"]
     saved = json.loads((run / "test_per_recording.json").read_text())["test"]
