@@ -146,10 +146,13 @@ def test_deviations_and_exploratory_fields_load(tmp_path):
         R.load_table(path)
 
 
-RECORDED = {"autoencoder": ["38006fb", "0904e51"], "classification": ["0904e51", "f2d3e8e"],
-            "lifting": ["0904e51", "f2d3e8e", "2363a0b"],
+# (0447a88 and 65ff54b: the float32 pin of the quick budgets, the registered designs and
+# the pose rows moved to the full budget, issue 57)
+RECORDED = {"autoencoder": ["38006fb", "0904e51", "0447a88"],
+            "classification": ["0904e51", "f2d3e8e", "0447a88"],
+            "lifting": ["0904e51", "f2d3e8e", "2363a0b", "0447a88"],
             "pose_estimation": ["0904e51", "f053164", "047d609", "b175e10", "8ed698f",
-                                 "c341cd6", "346e0a0", "0217f14", "7ea171e"]}
+                                 "c341cd6", "346e0a0", "0217f14", "7ea171e", "65ff54b"]}
 
 
 @pytest.mark.parametrize("table", R.TABLES)

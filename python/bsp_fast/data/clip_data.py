@@ -33,6 +33,37 @@ def _plain_value(v) -> bool:
     return False
 
 
+def _check_arguments(a: dict) -> None:
+    """ValueError for a constructor argument ClipData cannot use."""
+    if a["task"] not in TASKS:
+        raise ValueError(f"task must be one of {list(TASKS)}, got {a['task']!r}")
+    if a["dataset_dir"] is None and a["h5_path"] is None:
+        raise ValueError("BSPDataModule needs dataset_dir (converted on first use), h5_path, "
+                         "or both")
+    n = a["batch_size"]
+    if not isinstance(n, int) or isinstance(n, bool) or n <= 0:
+        raise ValueError(f"batch_size must be a positive integer, got {n!r}")
+    if not isinstance(a["num_workers"], int) or a["num_workers"] < 0:
+        raise ValueError(f"num_workers must be an integer >= 0, got {a['num_workers']!r}")
+    bad = sorted(set(a["convert_options"] or {}) & set(_NOT_OUTPUT + ("dataset", "out_path")))
+    if bad:
+        raise ValueError(f"convert_options: {bad} are not conversion settings")
+
+
+def _plain_options(a: dict) -> dict:
+    """The constructor's arguments as a checkpoint's hyper-parameters (plain values:
+    paths as text, only the dataset options that are plain)."""
+    out = dict(a)
+    for key in ("dataset_dir", "h5_path", "cache_dir", "test_dir"):
+        out[key] = None if a[key] is None else str(a[key])
+    for key in ("benchmark", "balance", "augment", "pin_memory", "verbose"):
+        out[key] = bool(a[key])
+    out["convert_options"] = dict(a["convert_options"] or {})
+    out["dataset_options"] = {k: v for k, v in (a["dataset_options"] or {}).items()
+                              if _plain_value(v)}
+    return out
+
+
 class ClipData:
     """Train/val/test loaders of one task over a converted HDF5 file (plain Python: the
     scoring commands use it without Lightning; :class:`BSPDataModule` is the same as a
@@ -67,19 +98,9 @@ class ClipData:
                  persistent_workers: bool | None = None, convert_options: dict | None = None,
                  dataset_options: dict | None = None, cache_dir=None, verbose: bool = True,
                  test_dir=None):
+        given = {k: v for k, v in locals().items() if k not in ("self", "__class__")}
         super().__init__()
-        if task not in TASKS:
-            raise ValueError(f"task must be one of {list(TASKS)}, got {task!r}")
-        if dataset_dir is None and h5_path is None:
-            raise ValueError("BSPDataModule needs dataset_dir (converted on first use), h5_path, "
-                             "or both")
-        if not isinstance(batch_size, int) or isinstance(batch_size, bool) or batch_size <= 0:
-            raise ValueError(f"batch_size must be a positive integer, got {batch_size!r}")
-        if not isinstance(num_workers, int) or num_workers < 0:
-            raise ValueError(f"num_workers must be an integer >= 0, got {num_workers!r}")
-        bad = sorted(set(convert_options or {}) & set(_NOT_OUTPUT + ("dataset", "out_path")))
-        if bad:
-            raise ValueError(f"convert_options: {bad} are not conversion settings")
+        _check_arguments(given)
         self.dataset_dir = None if dataset_dir is None else Path(dataset_dir)
         self.task, self.benchmark_windows, self.balance = task, bool(benchmark), bool(balance)
         self._explicit = dict(clip_length=clip_length, clip_offset=clip_offset)
@@ -105,28 +126,13 @@ class ClipData:
         self.datasets: dict = {}
         self.conversion_report = None
         self.reused = None
-        saved = {k: v for k, v in self.dataset_options.items() if _plain_value(v)}
         #: the constructor's arguments as plain values (a checkpoint's hyper-parameters)
-        self.options = dict(
-            dataset_dir=None if dataset_dir is None else str(dataset_dir),
-            h5_path=None if h5_path is None else str(h5_path), task=task,
-            clip_length=clip_length, clip_offset=clip_offset, benchmark=bool(benchmark),
-            balance=bool(balance), noise=noise, mjp=mjp, batch_size=batch_size,
-            num_workers=num_workers, augment=bool(augment), seed=seed, eval_seed=eval_seed,
-            sampler_seed=sampler_seed, block_size=block_size, pin_memory=bool(pin_memory),
-            persistent_workers=persistent_workers, convert_options=dict(convert_options or {}),
-            dataset_options=saved, cache_dir=None if cache_dir is None else str(cache_dir),
-            verbose=bool(verbose), test_dir=None if test_dir is None else str(test_dir))
+        self.options = _plain_options(given)
         #: ``test_dir``: another dataset directory whose test split, converted with these
         #: same options, replaces this one's (a registered independent test set)
-        self.test_data = None if test_dir is None else ClipData(
-            dataset_dir=test_dir, task=task, clip_length=clip_length,
-            clip_offset=clip_offset, benchmark=benchmark, balance=balance, noise=noise,
-            mjp=mjp, batch_size=batch_size, num_workers=num_workers, augment=augment,
-            seed=seed, eval_seed=eval_seed, sampler_seed=sampler_seed,
-            block_size=block_size, pin_memory=pin_memory,
-            persistent_workers=persistent_workers, convert_options=convert_options,
-            dataset_options=dataset_options, verbose=verbose)
+        self.test_data = None if test_dir is None else ClipData(**{
+            **{k: v for k, v in given.items() if k not in ("h5_path", "cache_dir")},
+            "dataset_dir": test_dir, "test_dir": None})
 
     @classmethod
     def benchmark(cls, dataset_dir=None, h5_path=None, task: str = "classification", **kwargs):

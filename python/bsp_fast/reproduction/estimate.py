@@ -196,6 +196,49 @@ def _timed(loader, n: int, step) -> list:
         times.append(clock() - t0)
 
 
+def _probe_options(tab: dict, row: dict, budget: str, data, overrides) -> tuple:
+    """``(opts, row, note)``: the row's run options; a sibling dataset not made yet
+    (data_variants) is stood in for by --data, the same preset's shapes (said beside the
+    row in ``note``)."""
+    from .table_files import row_options
+
+    with tempfile.TemporaryDirectory(prefix="bsp-estimate-") as tmp:
+        opts = row_options(tab, row, budget, data, Path(tmp) / row["name"], overrides)
+    note = None
+    if row.get("data_suffix") and not Path(opts["data"]).exists():
+        note = f"probed on --data: {opts['data']} not made yet"
+        opts["data"] = str(data)
+        row = {k: v for k, v in row.items() if k != "data_suffix"}
+    return opts, row, note
+
+
+def _steps(module, cfg: dict, bf16: bool) -> tuple:
+    """``(train_step, eval_step)`` of a run's net: one optimiser update, and one
+    validation batch (forward, loss and the metrics)."""
+    import torch
+
+    from ..training.scoring import eval_step as score_step
+
+    net = module.net
+    opt = net.configure_optimizers(lr=cfg["lr"], total_steps=cfg.get("max_steps") or None)
+    opt = opt["optimizer"]
+
+    def train_step(batch):
+        net.train()
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            loss = net.loss(net.forward_batch(batch), batch)
+        opt.zero_grad(set_to_none=True)
+        loss.float().backward()
+        opt.step()
+
+    def eval_step(batch):
+        net.eval()
+        with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            score_step(module.spec, net, batch, module.val_metrics)
+
+    return train_step, eval_step
+
+
 def probe_row(tab: dict, row: dict, budget: str, data, overrides=None, *, steps: int = 4,
               eval_batches: int = 3, log=print) -> dict:
     """Times one row (see the module's docstring): ``{"model", "precision", "threads",
@@ -209,17 +252,9 @@ def probe_row(tab: dict, row: dict, budget: str, data, overrides=None, *, steps:
     from ..training.module import TASK_MODULES
     from ..training.precision import resolve_precision
     from ..training.setup import make_datamodule, prepare_data
-    from .table_files import prepare_row_data, row_options
+    from .table_files import prepare_row_data
 
-    with tempfile.TemporaryDirectory(prefix="bsp-estimate-") as tmp:
-        opts = row_options(tab, row, budget, data, Path(tmp) / row["name"], overrides)
-    note = None
-    if row.get("data_suffix") and not Path(opts["data"]).exists():
-        # a sibling dataset not made yet (data_variants): the same preset's shapes, so
-        # --data stands in for it (said beside the row)
-        note = f"probed on --data: {opts['data']} not made yet"
-        opts["data"] = str(data)
-        row = {k: v for k, v in row.items() if k != "data_suffix"}
+    opts, row, note = _probe_options(tab, row, budget, data, overrides)
     t0 = time.process_time()
     opts = prepare_row_data(tab, row, opts)
     cfg = C.defaults() | opts
@@ -239,24 +274,7 @@ def probe_row(tab: dict, row: dict, budget: str, data, overrides=None, *, steps:
               "test_batches": len(dm.test_dataloader())}
     if cfg.get("limit_batches"):
         counts = {k: min(v, int(cfg["limit_batches"])) for k, v in counts.items()}
-    opt = net.configure_optimizers(lr=cfg["lr"], total_steps=cfg.get("max_steps") or None)
-    opt = opt["optimizer"]
-
-    def train_step(batch):
-        net.train()
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-            loss = net.loss(net.forward_batch(batch), batch)
-        opt.zero_grad(set_to_none=True)
-        loss.float().backward()
-        opt.step()
-
-    from ..training.scoring import eval_step as score_step
-
-    def eval_step(batch):  # the validation step of a run: forward, loss and the metrics
-        net.eval()
-        with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-            score_step(module.spec, net, batch, module.val_metrics)
-
+    train_step, eval_step = _steps(module, cfg, bf16)
     first = _timed(train_loader, 1, train_step)  # warm-up (allocations, first kernels)
     n = 2 if first and first[0] > 5.0 else steps  # a slow model: 2 timed updates
     step_s = statistics.median(_timed(train_loader, n, train_step))
