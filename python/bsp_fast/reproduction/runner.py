@@ -358,7 +358,7 @@ def plan_table(table, data, budget: str, out, *, seeds=None, split_seeds=False, 
     tab = table if isinstance(table, dict) else load_table(table)
     seed_values = None if seeds is None else seed_list(seeds)
     jobs = _check_call(budget, seed_values, jobs, split_seeds, data)
-    wanted = wanted_rows(tab, rows)
+    wanted = wanted_rows(tab, rows or _not_moved(tab, budget, log))
     base = Path(out) / f"{tab['table']}-{budget}"
     names = _run_names(tab, wanted, seed_values, base, budget)
     kept = [n for n, d in names.items()  # reused or continued, not retrained
@@ -380,6 +380,18 @@ def plan_table(table, data, budget: str, out, *, seeds=None, split_seeds=False, 
     for run in plan.runs:
         _decide(plan, run, force, dry_run, log)
     return plan
+
+
+def _not_moved(tab: dict, budget: str, log) -> list | None:
+    """The rows of ``budget``: a row whose ``moved: {to: ...}`` names another budget is
+    that budget's (said once; ``--rows`` still runs it on purpose). None: every row."""
+    moved = [r["name"] for r in tab["rows"]
+             if (r.get("moved") or {}).get("to") not in (None, budget)]
+    if not moved:
+        return None
+    log(f"rows {', '.join(moved)} are registered in another budget (moved:) and are not "
+        f"run in {budget!r}; --rows runs them on purpose")
+    return [r["name"] for r in tab["rows"] if r["name"] not in moved]
 
 
 def _decide(plan: TablePlan, run, force: bool, dry_run: bool, log) -> None:
