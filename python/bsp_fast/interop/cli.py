@@ -11,9 +11,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..command_line import ArgumentParser
+from ..command_line import ArgumentParser, run_command
 from .._extras import require
-from ..atomic import OutputOverlapError, check_outputs, refuse
+from ..atomic import check_outputs
 from ..defaults import CONVERT
 from ..skeletons import JOINT_SETS, coverage_table
 from . import export_coco, export_videopose3d, import_coco, import_openpose
@@ -374,26 +374,12 @@ def _split_counts(split: str, clips: int, counts) -> str:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        with cli_wording():
-            text = _run(args)
-    except OutputOverlapError as exc:
-        return refuse("bsp-interop", exc)
-    except ImportError as exc:  # an optional dependency (its message names the extra)
-        print(f"bsp-interop: {exc}", file=sys.stderr)
-        return 1
-    except FileExistsError as exc:
-        print(f"bsp-interop: {exc}", file=sys.stderr)
-        return 3
-    except BadInput as exc:
-        print(f"bsp-interop: {exc}", file=sys.stderr)
-        return 1
-    except ValueError as exc:
-        print(f"bsp-interop: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"bsp-interop: {exc}", file=sys.stderr)
-        return 1
+    return run_command("bsp-interop", _main, args)
+
+
+def _main(args) -> int:
+    with cli_wording():
+        text = _run(args)
     if not getattr(args, "quiet", False):
         print(text)
     return 0

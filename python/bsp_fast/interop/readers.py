@@ -25,7 +25,10 @@ __all__ = ["BadInput", "Detections", "read_coco", "read_openpose", "read_labels"
 
 
 class BadInput(ValueError):
-    """An input file cannot be imported as it is (the message names file, record, reason)."""
+    """An input file cannot be imported as it is (the message names file, record, reason).
+    Bad data, not a bad argument: exit code 1 (command_line.exit_code reads ``code``)."""
+
+    code = 1
 
 
 _WORDING = contextvars.ContextVar("bsp_interop_wording", default="python")
