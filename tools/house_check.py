@@ -29,11 +29,10 @@ FUNCTION_LIMIT = 60
 #: functions allowed over FUNCTION_LIMIT lines, and why (``path:function``)
 LONG_FUNCTIONS = {
     # declarative command lines: one add_argument per option, nothing to split but lists
-    "preview/cli.py:build_parser": "an argparse declaration, one option after another",
     "cpp/src/bindings/media.cpp:88": "pybind11 declarations, one .def after another",
-    "conversion/cli.py:_parser": "an argparse declaration, one option after another",
     # one public function whose keyword arguments are documented where they are checked
-    "conversion/api.py:convert": "checks, then one call into the core, then the report",
+    "conversion/api.py:convert": "the public API's reference is its docstring (46 lines); "
+                                 "the code is 44",
     "interop/clipfile.py:write_clip_file": "one HDF5 layout written top to bottom",
     "interop/exporters.py:export_coco": "one COCO document built top to bottom",
     "interop/exporters.py:export_videopose3d": "one VideoPose3D archive built top to bottom",

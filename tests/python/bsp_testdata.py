@@ -123,3 +123,23 @@ def corrupt_apng_frame(path, j: int) -> None:
             path.write_bytes(bytes(data))
             return
     raise AssertionError(f"no fdAT for frame {j}")
+
+
+def table_clip_files(root) -> dict:
+    """One small clip file per report table's task (the reproduce tests' data): lifting
+    and classification at L 16, autoencoder at L 30, pose estimation with media at L 4;
+    the classification file marked as benchmark windows."""
+    import h5py
+
+    from bsp_fast.data.testing import write_clip_file
+
+    files = {"lifting": root / "l16.h5", "classification": root / "bench.h5",
+             "autoencoder": root / "l30.h5", "pose_estimation": root / "media.h5"}
+    write_clip_file(files["lifting"], clips=(24, 12, 12), clip_length=16, seed=1)
+    write_clip_file(files["autoencoder"], clips=(24, 12, 12), clip_length=30, seed=2)
+    write_clip_file(files["pose_estimation"], clips=(16, 8, 8), clip_length=4, seed=4,
+                    media=True)
+    write_clip_file(files["classification"], clips=(24, 12, 12), clip_length=16, seed=3)
+    with h5py.File(files["classification"], "a") as f:  # stands in for benchmark windows
+        f.attrs["benchmark"] = 1
+    return files

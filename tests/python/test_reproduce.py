@@ -9,11 +9,10 @@ import json
 from pathlib import Path
 import re
 
-import h5py
 import pytest
+from bsp_testdata import table_clip_files
 import torch
 
-from bsp_fast.data.testing import write_clip_file
 from bsp_fast.training import config as C
 from bsp_fast import reproduction as R
 from bsp_fast.reproduction.findings import ONE_RUN
@@ -27,17 +26,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
-    root = tmp_path_factory.mktemp("repro")
-    files = {"lifting": root / "l16.h5", "classification": root / "bench.h5",
-             "autoencoder": root / "l30.h5", "pose_estimation": root / "media.h5"}
-    write_clip_file(files["lifting"], clips=(24, 12, 12), clip_length=16, seed=1)
-    write_clip_file(files["autoencoder"], clips=(24, 12, 12), clip_length=30, seed=2)
-    write_clip_file(files["pose_estimation"], clips=(16, 8, 8), clip_length=4, seed=4,
-                    media=True)
-    write_clip_file(files["classification"], clips=(24, 12, 12), clip_length=16, seed=3)
-    with h5py.File(files["classification"], "a") as f:  # stands in for benchmark windows
-        f.attrs["benchmark"] = 1
-    return files
+    return table_clip_files(tmp_path_factory.mktemp("repro"))
 
 
 # ---------------------------------------------------------------------- table files

@@ -207,18 +207,12 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
         raise ValueError("shards needs a client (a Dask cluster to run them on)")
     if progress is None:
         progress = _is_terminal(sys.stderr)
-    st = settings
-    options = dict(clip_length=st["clip_length"], clip_stride=st["clip_offset"],
-                   eval_clip_stride=eval_clip_offset or 0, min_video_length=min_video_length or 0,
-                   label_fraction=_label_fraction(label), benchmark=st["benchmark"],
-                   val_frac=float(val_frac), test_frac=float(test_frac), seed=st["seed"],
-                   balance=st["balance"], fov=st["fov"], threads=int(threads or 0),
-                   verify=bool(verify), compress=st["compress"], media=st["media"],
-                   crop_size=int(crop_size), skip_bad_media=bool(skip_bad_media),
-                   crop_box=crop_box, crop_context=float(crop_context),
-                   source_path=str(root.resolve()),
-                   extra_attrs={"settings_json": json.dumps(settings, sort_keys=True)})
-    why_none = None if st["media"] else (
+    options = _core_options(settings, root, eval_clip_offset=eval_clip_offset,
+                            min_video_length=min_video_length, label=label,
+                            val_frac=val_frac, test_frac=test_frac, threads=threads,
+                            verify=verify, crop_size=crop_size, skip_bad_media=skip_bad_media,
+                            crop_box=crop_box, crop_context=crop_context)
+    why_none = None if settings["media"] else (
         "the dataset's config.yaml says poses_only: true" if media is None else "media=False")
     out.parent.mkdir(parents=True, exist_ok=True)
     if client is not None:
@@ -226,23 +220,36 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
 
         report = convert_sharded(str(csv), out, options, client, shards=shards, strict=strict,
                                  root=root, force=force)
-        report["settings"] = settings
-        report["media"]["why_none"] = why_none
-        for w in report["warnings"]:
-            warnings.warn(f"bsp_fast.convert: {w} ({out})", UserWarning, stacklevel=2)
-        return report
-    with atomic_output(out, force=force) as tmp:
-        report = _run(str(csv), str(tmp), options, progress)
-        report["warnings"] = _report.problems(report)
-        if strict and report["warnings"]:
-            raise UnusableConversion(f"{root}: unusable conversion (strict): "
-                                     + "; ".join(report["warnings"]) + "; nothing written")
-    report["output"] = str(out)
+    else:
+        with atomic_output(out, force=force) as tmp:
+            report = _run(str(csv), str(tmp), options, progress)
+            report["warnings"] = _report.problems(report)
+            if strict and report["warnings"]:
+                raise UnusableConversion(f"{root}: unusable conversion (strict): "
+                                         + "; ".join(report["warnings"]) + "; nothing written")
+        report["output"] = str(out)
     report["settings"] = settings
     report["media"]["why_none"] = why_none
     for w in report["warnings"]:
         warnings.warn(f"bsp_fast.convert: {w} ({out})", UserWarning, stacklevel=2)
     return report
+
+
+def _core_options(st: dict, root: Path, *, eval_clip_offset, min_video_length, label,
+                  val_frac, test_frac, threads, verify, crop_size, skip_bad_media, crop_box,
+                  crop_context) -> dict:
+    """The core's conversion options from the resolved settings ``st`` (the file's
+    ``settings_json`` attribute too)."""
+    return dict(clip_length=st["clip_length"], clip_stride=st["clip_offset"],
+                eval_clip_stride=eval_clip_offset or 0, min_video_length=min_video_length or 0,
+                label_fraction=_label_fraction(label), benchmark=st["benchmark"],
+                val_frac=float(val_frac), test_frac=float(test_frac), seed=st["seed"],
+                balance=st["balance"], fov=st["fov"], threads=int(threads or 0),
+                verify=bool(verify), compress=st["compress"], media=st["media"],
+                crop_size=int(crop_size), skip_bad_media=bool(skip_bad_media),
+                crop_box=crop_box, crop_context=float(crop_context),
+                source_path=str(root.resolve()),
+                extra_attrs={"settings_json": json.dumps(st, sort_keys=True)})
 
 
 def _is_terminal(stream) -> bool:

@@ -37,6 +37,31 @@ def _parser() -> argparse.ArgumentParser:
         formatter_class=HelpFormatter)
     p.add_argument("dataset", help="dataset directory holding data.csv (or the data.csv itself)")
     p.add_argument("output", help="HDF5 file to write (written to a temporary name, then renamed)")
+    _clip_options(p)
+    _media_options(p)
+    p.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
+    p.add_argument("--scheduler", default="threads", metavar="threads|dask|dask:ADDRESS",
+                   help="where to convert: " + SCHEDULER_HELP + "; with dask, OUT is made of "
+                        "virtual datasets over the folder OUT.shards, which must stay next to "
+                        "it (docs/distributed.md)")
+    p.add_argument("--shards", type=int, default=None, metavar="N",
+                   help="with --scheduler dask: tasks (default: one per Dask worker); the "
+                        "output does not depend on it")
+    p.add_argument("--verify", action="store_true",
+                   help="check relative/component/world columns agree (mm) and pose.camera "
+                        "matches the projection of pose.world (px), per recording")
+    p.add_argument("--strict", action="store_true",
+                   help="an empty split or a split with a single class is an error (exit 1, "
+                        "nothing written) instead of a warning")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bars or summary (warnings are still printed); bars are "
+                        "shown only when stderr is a terminal")
+    return p
+
+
+def _clip_options(p) -> None:
+    """How clips are cut, labelled and split."""
     p.add_argument("--clip-length", type=int, default=None, metavar="L",
                    help=f"frames per clip (default {CONVERT['clip_length']}; "
                         f"{CONVERT['benchmark_clip_length']} with --benchmark)")
@@ -68,14 +93,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=CONVERT["seed"], help="seed of the split shuffle")
     p.add_argument("--balance", action="store_true",
                    help="balance the train split's classes (keep min class count of each)")
-    p.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
-    p.add_argument("--scheduler", default="threads", metavar="threads|dask|dask:ADDRESS",
-                   help="where to convert: " + SCHEDULER_HELP + "; with dask, OUT is made of "
-                        "virtual datasets over the folder OUT.shards, which must stay next to "
-                        "it (docs/distributed.md)")
-    p.add_argument("--shards", type=int, default=None, metavar="N",
-                   help="with --scheduler dask: tasks (default: one per Dask worker); the "
-                        "output does not depend on it")
+
+
+def _media_options(p) -> None:
+    """What is stored besides the poses: compression, crops, masks."""
     p.add_argument("--compress", action="store_true",
                    help="shuffle+deflate the large target arrays and the RGB crops (smaller, "
                         "slower to read); the masks are always deflated")
@@ -96,17 +117,6 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--skip-bad-media", action="store_true",
                    help="leave out recordings whose MP4 or APNG is missing or broken (listed in "
                         "the summary) instead of failing")
-    p.add_argument("--verify", action="store_true",
-                   help="check relative/component/world columns agree (mm) and pose.camera "
-                        "matches the projection of pose.world (px), per recording")
-    p.add_argument("--strict", action="store_true",
-                   help="an empty split or a split with a single class is an error (exit 1, "
-                        "nothing written) instead of a warning")
-    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
-    p.add_argument("--quiet", action="store_true",
-                   help="no progress bars or summary (warnings are still printed); bars are "
-                        "shown only when stderr is a terminal")
-    return p
 
 
 class _Terminated(KeyboardInterrupt):

@@ -38,6 +38,14 @@ def build_parser() -> argparse.ArgumentParser:
                "Details: docs/preview.md.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
+    _frames_parser(sub)
+    _clips_parser(sub)
+    _pose3d_parser(sub)
+    _predictions_parser(sub)
+    return p
+
+
+def _frames_parser(sub) -> None:
     f = sub.add_parser("frames", help="video frames of one recording with annotations",
                        description="RGB frames of one recording with the 2D skeleton "
                                    "(pose.camera), the joint bbox, the crossing label and the "
@@ -63,6 +71,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="pedestrian.idx (default: the recording's first)")
     _common(f, 30.0)
 
+
+def _clips_parser(sub) -> None:
     c = sub.add_parser("clips", help="contact sheet of the clips of a bsp-convert file",
                        description="A grid of clips: the pedestrian crop with its skeleton "
                                    "when the file holds media (joints hidden in the mask are "
@@ -81,6 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--cols", type=int, help="panels per row (default: about square)")
     _common(c, 10.0)
 
+
+def _pose3d_parser(sub) -> None:
     d = sub.add_parser("pose3d", help="a clip's 3D skeleton from two viewpoints",
                        description="The 3D joint locations of one clip (matplotlib), from the "
                                    "front and from the side, axes fixed over the clip.")
@@ -97,6 +109,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--size", default="800x400", help="picture size WxH (default: 800x400)")
     _common(d, 30.0)
 
+
+def _predictions_parser(sub) -> None:
     r = sub.add_parser("predictions", help="ground truth vs predictions of bsp-predict",
                        description="Ground truth (green) against the prediction (magenta): "
                                    "2D tasks as a sheet of clips (pose estimation on its crops, "
@@ -115,7 +129,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="pose estimation: the converted file holding the crops (default: the "
                         "one bsp-predict read, its 'source' attribute)")
     _common(r, 10.0)
-    return p
 
 
 def _run(args) -> dict:
