@@ -33,7 +33,6 @@ LONG_FUNCTIONS = {
     # one public function whose keyword arguments are documented where they are checked
     "conversion/api.py:convert": "the public API's reference is its docstring (46 lines); "
                                  "the code is 44",
-    "interop/clipfile.py:write_clip_file": "one HDF5 layout written top to bottom",
     "interop/exporters.py:export_coco": "one COCO document built top to bottom",
     "interop/exporters.py:export_videopose3d": "one VideoPose3D archive built top to bottom",
     "interop/readers.py:read_coco": "the COCO format's cases, one after another",

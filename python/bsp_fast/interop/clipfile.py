@@ -109,6 +109,49 @@ def _fixed_plan(plan_for, st: dict, eval_stride: int, row_split: list) -> dict:
     return out
 
 
+def _tracks(det: Detections, L: int, skip_short: bool) -> tuple:
+    """``(vcode, videos, tcode, tracks, order, runs, short, skipped)``: the detections'
+    video and track codes, their rows ordered by video, track and frame without the tracks
+    whose longest run of consecutive frames is shorter than a clip (an error unless
+    ``skip_short``), each track's longest run, the short ones and why they were left out."""
+    vcode, videos = _codes(det.video)
+    tcode, tracks = _codes(det.track)
+    order = np.lexsort((det.frame, tcode, vcode))
+    runs = _longest_runs(vcode[order], tcode[order], det.frame[order])
+    short = {k: n for k, n in runs.items() if n < L}
+    skipped = [f"video {videos[v]!r} track {tracks[t]!r}: longest run of consecutive frames "
+               f"{n} < clip length {L}" for (v, t), n in short.items()]
+    if short and not skip_short:
+        raise BadInput(f"{det.source}: {len(short)} track(s) shorter than a clip: "
+                       + "; ".join(skipped[:5]) + ("; ..." if len(skipped) > 5 else "")
+                       + "; pass " + option("skip_short=True", "--skip-short-tracks")
+                       + " to leave them out; nothing written")
+    if short:
+        order = np.array([i for i in order if (vcode[i], tcode[i]) not in short], np.int64)
+        if len(order) == 0:
+            raise BadInput(f"{det.source}: every track is shorter than a clip of {L} frames; "
+                           "nothing written")
+    return vcode, videos, tcode, tracks, order, runs, short, skipped
+
+
+def _plan_rows(rows: dict, st: dict, clip_options: dict, fixed) -> dict:
+    """The core's clip plan of ``rows``: the seeded split, or ``fixed`` (each row's split
+    kept, :func:`_fixed_plan`)."""
+    plan_for = lambda stride, eval_stride, balance: _core.plan_clips(  # noqa: E731
+        rows["video"].astype(np.int32), np.zeros(len(rows["frame"]), np.int64),
+        rows["track"], rows["frame"], rows["crossing"], rows["uv"], rows["width"],
+        rows["height"], clip_length=st["clip_length"], clip_stride=stride,
+        eval_clip_stride=eval_stride,
+        min_video_length=clip_options.get("min_video_length") or 0,
+        label_fraction=st["label_fraction"], benchmark=st["benchmark"],
+        val_frac=float(st["val_frac"]), test_frac=float(st["test_frac"]), seed=st["seed"],
+        balance=balance)
+    eval_stride = clip_options.get("eval_clip_offset") or st["clip_offset"]
+    if fixed is None:
+        return plan_for(st["clip_offset"], eval_stride, st["balance"])
+    return _fixed_plan(plan_for, st, eval_stride, fixed)
+
+
 def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3,
                     derive: bool = True, skip_short: bool = False, force: bool = False,
                     splits: dict | None = None, labels_source: str | None = None,
@@ -129,40 +172,15 @@ def write_clip_file(det: Detections, out, *, labels=None, threshold: float = 0.3
     L = st["clip_length"]
     if len(det.frame) == 0:
         raise BadInput(f"{det.source}: no detection to import")
-    vcode, videos = _codes(det.video)
-    tcode, tracks = _codes(det.track)
-    order = np.lexsort((det.frame, tcode, vcode))
-    runs = _longest_runs(vcode[order], tcode[order], det.frame[order])
-    short = {k: n for k, n in runs.items() if n < L}
-    skipped = [f"video {videos[v]!r} track {tracks[t]!r}: longest run of consecutive frames "
-               f"{n} < clip length {L}" for (v, t), n in short.items()]
-    if short and not skip_short:
-        raise BadInput(f"{det.source}: {len(short)} track(s) shorter than a clip: "
-                       + "; ".join(skipped[:5]) + ("; ..." if len(skipped) > 5 else "")
-                       + "; pass " + option("skip_short=True", "--skip-short-tracks")
-                       + " to leave them out; nothing written")
-    if short:
-        order = np.array([i for i in order if (vcode[i], tcode[i]) not in short], np.int64)
-        if len(order) == 0:
-            raise BadInput(f"{det.source}: every track is shorter than a clip of {L} frames; "
-                           "nothing written")
+    vcode, videos, tcode, tracks, order, runs, short, skipped = _tracks(det, L, skip_short)
     crossing = _crossing(det, labels, order)
     m, uv, visible, conf, at_origin = map_joints(det.joints, det.points[order],
                                                  det.scores[order], threshold, derive)
     rows = dict(video=vcode[order], track=tcode[order], frame=det.frame[order],
                 width=det.width[order], height=det.height[order], crossing=crossing,
                 uv=uv, visible=visible, confidence=conf)
-    plan_for = lambda stride, eval_stride, balance: _core.plan_clips(  # noqa: E731
-        rows["video"].astype(np.int32), np.zeros(len(order), np.int64), rows["track"],
-        rows["frame"], crossing, uv, rows["width"], rows["height"],
-        clip_length=L, clip_stride=stride, eval_clip_stride=eval_stride,
-        min_video_length=clip_options.get("min_video_length") or 0,
-        label_fraction=st["label_fraction"], benchmark=st["benchmark"],
-        val_frac=float(st["val_frac"]), test_frac=float(st["test_frac"]), seed=st["seed"],
-        balance=balance)
-    eval_stride = clip_options.get("eval_clip_offset") or st["clip_offset"]
-    plan = (plan_for(st["clip_offset"], eval_stride, st["balance"]) if splits is None else
-            _fixed_plan(plan_for, st, eval_stride, [splits[videos[v]] for v in rows["video"]]))
+    plan = _plan_rows(rows, st, clip_options, None if splits is None else
+                      [splits[videos[v]] for v in rows["video"]])
     clips = {s: int(len(plan[s]["first"])) for s in ("train", "val", "test")}
     if sum(clips.values()) == 0:
         reasons = "; ".join(f"{r}" for _, r in plan["skipped"][:3])
