@@ -34,7 +34,8 @@ LONG_FUNCTIONS = {
     "conversion/api.py:convert": "the public API's reference is its docstring (46 lines); "
                                  "the code is 44",
     "interop/exporters.py:export_coco": "one COCO document built top to bottom",
-    "interop/exporters.py:export_videopose3d": "one VideoPose3D archive built top to bottom",
+    "interop/exporters.py:export_videopose3d": "one loop over the runs, then the two "
+                                               "archives; its per-run steps are helpers",
     "interop/readers.py:read_coco": "the COCO format's cases, one after another",
     "reproduction/table_files.py:load_table": "one table file's checks, key by key",
     "training/eval_breakdown.py:_frame_tables": "one table per breakdown, side by side",

@@ -261,6 +261,33 @@ def _subject_names(runs: list) -> list:
     return [forms(r)[level.get(k, 0)] for k, r in enumerate(runs)]
 
 
+def _h36m_3d(r: dict, frame_3d: str, m3, rules3: dict, cameras: dict, name: str):
+    """A run's ground-truth 3D joints as H36M-17 in ``frame_3d`` (every joint is known,
+    seen or not); in the ground frame its camera goes into ``cameras[name]``."""
+    world = r["xyz"].astype(np.float64)
+    if frame_3d == "ground":
+        world, q, t = ground_frame(world, r["camera"])
+        cameras[name] = {"orientation": q.astype(np.float32).tolist(),
+                         "translation": t.astype(np.float32).tolist()}
+    xyz, ok3 = m3.apply(world, fill=np.nan)
+    _apply_fills(xyz, ok3, rules3)
+    return xyz
+
+
+def _joints_2d(r: dict, m, rules: dict) -> tuple:
+    """``(uv, interpolated, never)``: a run's 2D joints in the target set, filled by the
+    rules and interpolated over time; ``never``: joints missing in every frame."""
+    uv, ok = m.apply(r["uv"].astype(np.float64), r["present"], fill=np.nan)
+    _apply_fills(uv, ok, rules)
+    return _interpolate(uv, ok)
+
+
+def _fill_text(js, rules: dict) -> dict:
+    """``{joint: "0.5*a + 0.5*b"}``: how each filled joint of set ``js`` was made."""
+    return {js.joints[j]: " + ".join(f"{w:g}*{js.joints[s]}" for s, w in rule)
+            for j, rule in rules.items()}
+
+
 def export_videopose3d(h5_path, out_2d, out_3d=None, *, joints="coco17", split: str = "all",
                        frame_3d: str | None = None, viewer: bool = False, derive: bool = True,
                        force: bool = False) -> dict:
@@ -292,24 +319,14 @@ def export_videopose3d(h5_path, out_2d, out_3d=None, *, joints="coco17", split: 
     subjects = {s: [] for s in data}
     dropped, filled = [], 0
     for name, r in zip(_subject_names(runs), runs):
-        uv, ok = m.apply(r["uv"].astype(np.float64), r["present"], fill=np.nan)
-        _apply_fills(uv, ok, rules)
-        uv, n, never = _interpolate(uv, ok)
+        uv, n, never = _joints_2d(r, m, rules)
         if never:
             dropped.append(f"{name} ({r['split']}, frames {int(r['frames'][0])}-"
                            f"{int(r['frames'][-1])}): never sees "
                            + ", ".join(dst.joints[j] for j in never))
             continue
         filled += n
-        xyz = None
-        if out_3d is not None:  # ground truth: every joint is known, seen or not
-            world = r["xyz"].astype(np.float64)
-            if frame_3d == "ground":
-                world, q, t = ground_frame(world, r["camera"])
-                cameras[name] = {"orientation": q.astype(np.float32).tolist(),
-                                 "translation": t.astype(np.float32).tolist()}
-            xyz, ok3 = m3.apply(world, fill=np.nan)
-            _apply_fills(xyz, ok3, rules3)
+        xyz = None if out_3d is None else _h36m_3d(r, frame_3d, m3, rules3, cameras, name)
         uv, xyz, pad = _viewer_run(uv, xyz, r) if viewer else (uv, xyz, 0)
         pos2d[name] = {"custom": [uv.astype(np.float32)]}
         video_meta[name] = {"w": int(r["w"]), "h": int(r["h"])}
@@ -322,8 +339,7 @@ def export_videopose3d(h5_path, out_2d, out_3d=None, *, joints="coco17", split: 
     if not pos2d:
         raise BadInput(f"{h5_path}: every run misses a joint in all its frames ("
                        + "; ".join(dropped[:3]) + "); nothing written")
-    fills = {dst.joints[j]: " + ".join(f"{w:g}*{dst.joints[s]}" for s, w in rule)
-             for j, rule in rules.items()}
+    fills = _fill_text(dst, rules)
     metadata = {"layout_name": VIDEOPOSE3D_LAYOUTS.get(dst.name, dst.name),
                 "num_joints": len(dst), "keypoints_symmetry": [list(dst.left), list(dst.right)],
                 "video_metadata": video_meta, "joint_names": list(dst.joints),
@@ -331,11 +347,9 @@ def export_videopose3d(h5_path, out_2d, out_3d=None, *, joints="coco17", split: 
                 "interpolated_joints": filled}
     targets = [(out_2d, dict(positions_2d=pos2d, metadata=metadata), _save_npz)]
     if out_3d is not None:
-        meta3 = {"layout_name": "h36m", "num_joints": len(h36m),
+        meta3 = {"layout_name": "h36m", "num_joints": len(h36m), "cameras": cameras,
                  "joint_names": list(h36m.joints), "units": "metres", "frame": frame_3d,
-                 "cameras": cameras,
-                 "filled_joints": {h36m.joints[j]: " + ".join(
-                     f"{w:g}*{h36m.joints[s]}" for s, w in rule) for j, rule in rules3.items()}}
+                 "filled_joints": _fill_text(h36m, rules3)}
         targets.append((out_3d, dict(positions_3d=pos3d, metadata=meta3), _save_npz))
     _save_all(targets, force)
     return {"subjects": {s: len(v) for s, v in subjects.items()}, "joints": dst.name,
