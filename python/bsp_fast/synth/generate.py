@@ -211,7 +211,9 @@ def _run_clips(cfg: SynthConfig, root: str, workers: int, progress: bool, client
         def flush():
             while len(stats) in done:
                 i = len(stats)
-                _append_part(out, os.path.join(root, PARTS, f"{i:06d}.csv"), header=i == 0)
+                part = os.path.join(root, PARTS, f"{i:06d}.csv")
+                _append_part(out, part, header=i == 0)
+                os.remove(part)  # the disk holds data.csv and the parts in flight, not both
                 stats.append(done.pop(i))
 
         if client is not None:
