@@ -13,7 +13,7 @@ torch = pytest.importorskip("torch")
 import bsp_fast  # noqa: E402
 from bsp_fast import interop as I  # noqa: E402
 from bsp_fast.data import camera_intrinsics  # noqa: E402
-from bsp_fast.skeletons import skeleton_map  # noqa: E402
+from bsp_fast.skeleton import skeleton_map  # noqa: E402
 from bsp_fast.synth.cli import main as synth_main  # noqa: E402
 
 pytestmark = [pytest.mark.filterwarnings("ignore::UserWarning"),

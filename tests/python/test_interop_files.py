@@ -9,7 +9,7 @@ import pytest
 from bsp_fast import interop as I
 from bsp_fast.interop.cli import main
 from bsp_fast.skeleton import JOINT_INDEX as J
-from bsp_fast.skeletons import joint_set
+from bsp_fast.skeleton import joint_set
 
 B25 = {n: i for i, n in enumerate(joint_set("body25").joints)}
 W, H = 640, 360

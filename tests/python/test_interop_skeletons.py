@@ -1,11 +1,10 @@
-"""Joint sets and skeleton maps (bsp_fast.skeletons) against the formats' published facts."""
+"""Joint sets and skeleton maps (bsp_fast.skeleton) against the formats' published facts."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bsp_fast import skeleton as carla
-from bsp_fast import skeletons as S
+from bsp_fast import skeleton as S
 
 REPO = Path(__file__).resolve().parents[2]
 COCO = ["nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder",
@@ -17,7 +16,7 @@ def test_sets_sizes_orders_and_sides():
     sizes = {n: len(s) for n, s in S.JOINT_SETS.items()}
     assert sizes == {"carla26": 26, "coco17": 17, "body25": 25, "h36m17": 17, "smpl24": 24}
     assert list(S.JOINT_SETS["coco17"].joints) == COCO
-    assert S.CARLA.joints == carla.JOINT_NAMES
+    assert S.CARLA.joints == S.JOINT_NAMES
     b = S.JOINT_SETS["body25"].joints  # OpenPose's documented indices
     assert (b[0], b[1], b[8], b[15], b[18], b[19], b[21], b[22], b[24]) == (
         "Nose", "Neck", "MidHip", "REye", "LEar", "LBigToe", "LHeel", "RBigToe", "RHeel")
@@ -27,7 +26,7 @@ def test_sets_sizes_orders_and_sides():
                                                    [2, 4, 6, 8, 10, 12, 14, 16])
     assert (list(h36m.left), list(h36m.right)) == ([4, 5, 6, 11, 12, 13], [1, 2, 3, 14, 15, 16])
     assert h36m.parents == (-1, 0, 1, 2, 0, 4, 5, 0, 7, 8, 9, 8, 11, 12, 8, 14, 15)
-    assert S.CARLA.flip_permutation == tuple(carla.FLIP_PERMUTATION)
+    assert S.CARLA.flip_permutation == tuple(S.FLIP_PERMUTATION)
     for s in S.JOINT_SETS.values():
         perm = np.array(s.flip_permutation)
         assert np.array_equal(perm[perm], np.arange(len(s)))  # an involution
@@ -61,13 +60,13 @@ def test_carla_coco_carla_round_trip_keeps_mapped_joints_exactly():
     assert len(direct) == 15
     assert np.array_equal(back[..., direct, :], pts[..., direct, :])  # bit for bit
     assert ok2[..., direct].all()
-    J = carla.JOINT_INDEX
+    J = S.JOINT_INDEX
     mid = (pts[..., J["crl_thigh__L"], :].astype(np.float64) + pts[..., J["crl_thigh__R"], :]) / 2
     assert np.array_equal(back[..., J["crl_hips__C"], :], mid.astype(np.float32))
     neck = (pts[..., J["crl_arm__L"], :].astype(np.float64) + pts[..., J["crl_arm__R"], :]) / 2
     assert np.array_equal(back[..., J["crl_neck__C"], :], neck.astype(np.float32))
     rest = [i for i, k in enumerate(kinds) if k == "missing"]
-    assert {carla.JOINT_NAMES[i] for i in rest} == {
+    assert {S.JOINT_NAMES[i] for i in rest} == {
         "crl_root", "crl_spine__C", "crl_spine01__C", "crl_shoulder__L", "crl_shoulder__R",
         "crl_toe__R", "crl_toeEnd__R", "crl_toe__L", "crl_toeEnd__L"}
     assert not ok2[..., rest].any() and np.isnan(back[..., rest, :]).all()
@@ -81,7 +80,7 @@ def test_missing_sources_make_missing_targets():
     present = np.ones(17, bool)
     present[11] = False  # left_hip
     out, ok = S.skeleton_map("coco", "carla").apply(coco, present, fill=0.0)
-    J = carla.JOINT_INDEX
+    J = S.JOINT_INDEX
     assert not ok[J["crl_thigh__L"]] and not ok[J["crl_hips__C"]]  # derived needs both
     assert ok[J["crl_thigh__R"]] and ok[J["crl_neck__C"]]
     assert np.array_equal(out[J["crl_thigh__L"]], [0.0, 0.0])

@@ -19,7 +19,7 @@ import pytest
 from bsp_fast.data.testing import write_clip_file
 from bsp_fast.interop import export_videopose3d
 from bsp_fast.interop.cli import main
-from bsp_fast.skeletons import joint_set
+from bsp_fast.skeleton import joint_set
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "interop.md"
 

@@ -1,7 +1,7 @@
 """Other tools' pose data in and out: importers of 2D detections (COCO keypoint JSON from
 MMPose / Detectron2, OpenPose per-frame JSON) into clip files in the bsp-convert HDF5
 schema, and exporters of clip files to VideoPose3D's ``.npz`` layout and to COCO keypoint
-JSON, through the skeleton maps of :mod:`bsp_fast.skeletons`. ``bsp-interop`` is the
+JSON, through the skeleton maps of :mod:`bsp_fast.skeleton`. ``bsp-interop`` is the
 command line (docs/interop.md).
 
 Modules: ``readers`` (input files, labels CSV), ``clipfile`` (planning and writing the

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_output
-from ..skeletons import CARLA, joint_set
+from ..skeleton import CARLA, joint_set
 from .benchmark_windows import SPLITS, seeded_split, track_windows, write_windows
 from .clipfile import clip_settings, map_joints
 from .readers import BadInput, load_json

@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import __version__
 from .._native import core as _core
-from ..skeletons import CARLA
+from ..skeleton import CARLA
 
 __all__ = ["Window", "track_windows", "seeded_split", "write_windows"]
 

@@ -15,7 +15,7 @@ from ..command_line import ArgumentParser, run_command
 from .._extras import require
 from ..atomic import check_outputs
 from ..defaults import CONVERT
-from ..skeletons import JOINT_SETS, coverage_table
+from ..skeleton import JOINT_SETS, coverage_table
 from . import export_coco, export_videopose3d, import_coco, import_openpose
 from .clipfile import clip_settings
 from .exporters import FRAMES_3D, SPLIT_CHOICES

@@ -1,6 +1,6 @@
 """Imported 2D detections -> a clip file in the bsp-convert HDF5 schema (2D tasks).
 
-The rows are mapped onto CARLA-26 (:mod:`bsp_fast.skeletons`), a joint counts as
+The rows are mapped onto CARLA-26 (:mod:`bsp_fast.skeleton`), a joint counts as
 ``visible`` when its confidence is at least ``threshold`` (and above 0), and the clips are
 planned by the C++ core's planner (``plan_clips``, the one bsp-convert uses), so clip
 length, offsets, the benchmark's time-to-event windows, labels, the in-image filter, the
@@ -18,7 +18,7 @@ from .._version import __version__
 from .._native import core as _core
 from ..atomic import atomic_output
 from ..conversion.api import clip_settings
-from ..skeletons import CARLA, skeleton_map
+from ..skeleton import CARLA, skeleton_map
 from .readers import BadInput, Detections, option, read_coco, read_labels, read_openpose
 
 __all__ = ["clip_settings", "write_clip_file", "map_joints", "import_coco", "import_openpose"]  # clip_settings: the converter's own

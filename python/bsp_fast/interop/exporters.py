@@ -30,7 +30,7 @@ import numpy as np
 
 from ..atomic import atomic_output
 from ..conversion.vds import open_clip_file
-from ..skeletons import CARLA, joint_set, skeleton_map
+from ..skeleton import CARLA, joint_set, skeleton_map
 from .readers import BadInput, option
 
 __all__ = ["read_clips", "export_videopose3d", "export_coco", "ground_frame", "FRAMES_3D",

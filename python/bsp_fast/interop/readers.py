@@ -18,7 +18,7 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from ..skeletons import joint_set
+from ..skeleton import joint_set
 
 __all__ = ["BadInput", "Detections", "read_coco", "read_openpose", "read_labels",
            "load_json", "option", "cli_wording"]
