@@ -14,7 +14,7 @@ OLD=$(mktemp -d)
 trap 'rm -rf "$OLD"' EXIT
 git archive "$REV" python benchmarks | tar -x -C "$OLD"
 # the compiled core is the same for both (this compares Python code)
-CORE=$("$PY" -c 'import bsp_fast._native as n, os; print(os.path.dirname(n._core.__file__))')
+CORE=$("$PY" -c 'import bsp_fast._native as n, os; print(os.path.dirname(n.core.__file__))')
 cp "$CORE"/_core*.so "$OLD/python/bsp_fast/"
 F="$OUT/fixture.h5"
 [ -f "$F" ] || "$PY" -c "from bsp_fast.data.testing import write_clip_file as w; \

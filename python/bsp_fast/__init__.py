@@ -1,15 +1,10 @@
 """bsp_fast: fast, complete toolkit for the CARLA-BSP pedestrian dataset."""
 from __future__ import annotations
 
-import pkgutil as _pkgutil
+from ._version import __version__  # noqa: F401
 
-# Lets a development build tree (PYTHONPATH=python:build/dev/py) provide `_core`.
-__path__ = _pkgutil.extend_path(__path__, __name__)  # type: ignore[name-defined]
-
-from ._version import __version__  # noqa: E402,F401
-
-from ._native import core as _core  # noqa: E402
-from .geometry import (  # noqa: E402
+from ._native import core as _core  # the C++ module (_native says where from)
+from .geometry import (
     compose,
     forward_kinematics,
     in_frame,
@@ -21,11 +16,11 @@ from .geometry import (  # noqa: E402
     to_world,
     transform_points,
 )
-from . import skeleton  # noqa: E402
-from .csvio import read_csv, write_csv  # noqa: E402
-from .conversion import convert  # noqa: E402
-from . import media, synth  # noqa: E402
-from .media import ApngReader, VideoReader  # noqa: E402
+from . import skeleton
+from .csvio import read_csv, write_csv
+from .conversion import convert
+from . import media, synth
+from .media import ApngReader, VideoReader
 
 Error = _core.Error
 CsvParseError = _core.CsvParseError

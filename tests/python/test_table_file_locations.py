@@ -32,7 +32,7 @@ def test_installed_layout_finds_the_tables_outside_the_source_tree(tmp_path):
                         ignore=shutil.ignore_patterns("__pycache__"))
     elsewhere = tmp_path / "somewhere" / "else"
     elsewhere.mkdir(parents=True)
-    env = dict(os.environ, PYTHONPATH=str(site))  # _core: the installed one (extend_path)
+    env = dict(os.environ, PYTHONPATH=str(site))  # _core: the installed one (_native.py)
     code = ("from bsp_fast.reproduction import load_table, TABLES\n"
             "for t in TABLES:\n    print(load_table(t)['path'])\n")
     r = subprocess.run([sys.executable, "-c", code], cwd=elsewhere, env=env,
