@@ -7,8 +7,9 @@ store locations in centimetres; :func:`reference_pose` returns metres and degree
 
 A :class:`JointSet` is an ordered list of joint names with its left/right pairs (for
 flipping) and, where the format defines one, its parents. The sets are ``carla26`` (the
-skeleton above), ``coco17`` (COCO keypoints: MMPose, Detectron2), ``body25`` (OpenPose BODY_25), ``h36m17`` (the 17 Human3.6M joints of
-VideoPose3D) and ``smpl24`` (the SMPL body joints of AMASS).
+skeleton above), ``coco17`` (COCO keypoints: MMPose, Detectron2), ``body25`` (OpenPose
+BODY_25), ``h36m17`` (the 17 Human3.6M joints of VideoPose3D) and ``smpl24`` (the SMPL body
+joints of AMASS).
 
 A :class:`SkeletonMap` from one set to another says, for every target joint, where its
 value comes from: one source joint (``direct``, copied exactly), the mid-point of two

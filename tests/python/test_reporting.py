@@ -9,7 +9,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from bsp_fast.metrics.spec import NORMALISER_FALLBACK
-from bsp_fast.reporting.run_tables import scored_text
+from bsp_fast.reporting.run_tables import initial_text, scored_text
 from bsp_fast.reporting.values import format_metric, format_value
 
 PKG = Path(__file__).resolve().parents[2] / "python" / "bsp_fast"
@@ -67,3 +67,11 @@ def test_scored_text_lists_the_metrics_and_explains_the_fallback():
     assert lines[1] == "  scored 12 clips of 3 recordings (--limit-batches 2)"
     assert any(ln.split() == ["mpjpe_mm", "51.5"] for ln in lines)
     assert lines[-1].startswith("  (")
+
+
+def test_initial_text_is_one_line_per_split_without_the_fallback_at_zero():
+    initial = {"baseline": "identity", "val": {"mpjpe_mm": 80.12345, NORMALISER_FALLBACK.key: 0.0},
+               "test": {"mpjpe_mm": 81.0, "pa_mpjpe_mm": None}}
+    assert initial_text(initial).splitlines() == [
+        "initial metrics (identity, before training):", "  val: mpjpe_mm 80.12",
+        "  test: mpjpe_mm 81"]

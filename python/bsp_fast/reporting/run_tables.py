@@ -21,7 +21,8 @@ import math
 from .._plain_progress import FALLBACK_NOTE, readable
 from .values import format_metric
 
-__all__ = ["table_rows", "format_table", "runs_table", "scored_text", "SETTING_KEYS"]
+__all__ = ["table_rows", "format_table", "runs_table", "scored_text", "initial_text",
+           "SETTING_KEYS"]
 
 #: the config values that make two runs' data settings differ (one initial row each)
 SETTING_KEYS = ("data", "clip_length", "clip_offset", "benchmark", "balance", "noise", "mjp",
@@ -133,4 +134,16 @@ def scored_text(res, limit_batches=None) -> str:
     lines += [f"  {key:14s} {value:.6g}" for key, value in shown.items()]
     if "normaliser_fallback" in shown:
         lines.append(f"  ({FALLBACK_NOTE})")
+    return "\n".join(lines)
+
+
+def initial_text(initial: dict) -> str:
+    """What bsp-train prints of the initial metrics before training (``initial``: the
+    trivial baseline's ``{"baseline": name, split: {metric: value}}``): one line per split,
+    its metrics as ``name value``."""
+    lines = [f"initial metrics ({initial['baseline']}, before training):"]
+    for split in ("val", "test"):
+        row = ", ".join(f"{k} {v:.4g}" for k, v in readable(initial.get(split, {})).items()
+                        if v is not None)
+        lines.append(f"  {split}: {row}")
     return "\n".join(lines)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import torch
 
-from .._plain_progress import readable
 from .per_recording import RecordingBreakdown
 from .scoring import TaskMetrics
 from .tasks import get_task
@@ -57,8 +56,6 @@ def log_initial(trainer, initial: dict, quiet: bool) -> None:
         logger.log_metrics(values, step=0)
         logger.save()
     if not quiet:
-        print(f"initial metrics ({initial['baseline']}, before training):")
-        for split in ("val", "test"):
-            row = ", ".join(f"{k} {v:.4g}" for k, v in readable(initial.get(split, {})).items()
-                            if v is not None)
-            print(f"  {split}: {row}")
+        from ..reporting.run_tables import initial_text
+
+        print(initial_text(initial))
