@@ -60,14 +60,13 @@ py::dict plan(const CArray<std::int32_t>& id, const CArray<std::int64_t>& cam,
 }
 
 }  // namespace
-}  // namespace bsp::py_bind
 
 BSP_BINDING(clips) {
-  using namespace bsp::py_bind;
-  namespace py = pybind11;
   m.def("plan_clips", &plan, py::arg("id_code"), py::arg("camera_idx"), py::arg("pedestrian_idx"),
         py::arg("frame_idx"), py::arg("is_crossing"), py::arg("pose_camera"), py::arg("width"),
         py::arg("height"),
         "Recordings, segments, clips, labels and the seeded split (docs/dataset-format.md, "
         "\"7. From rows to clips and splits\") from row keys.");
 }
+
+}  // namespace bsp::py_bind

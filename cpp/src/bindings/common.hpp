@@ -33,6 +33,8 @@ CArray<T> empty(const std::vector<py::ssize_t>& shape) {
 
 }  // namespace bsp::py_bind
 
+// BSP_BINDING(area) { m.def(...); } inside namespace bsp::py_bind: the area's function, which
+// sees the helpers above and `py` unqualified, registered for run_bindings.
 #define BSP_BINDING(name)                                                          \
   static void bsp_bind_##name(pybind11::module_& m);                               \
   [[maybe_unused]] static const int bsp_bind_reg_##name =                          \

@@ -142,11 +142,8 @@ py::array crop_resize_py(const CArray<std::uint8_t>& image, const CArray<float>&
 }
 
 }  // namespace
-}  // namespace bsp::py_bind
 
 BSP_BINDING(convert) {
-  using namespace bsp::py_bind;
-  namespace py = pybind11;
   using Stage = bsp::ConvertStage;
   py::enum_<Stage>(m, "ConvertStage", "What a running conversion is doing (ConvertProgress.stage).")
       .value("read", Stage::read, "reading data.csv (done/total: rows)")
@@ -196,3 +193,5 @@ BSP_BINDING(convert) {
         "Cuts the integer square box [u0, v0, u1, v1] out of an (H, W[, C]) uint8 image with "
         "zero padding and resizes it to size x size (INTER_AREA, or INTER_NEAREST for tags).");
 }
+
+}  // namespace bsp::py_bind

@@ -94,11 +94,8 @@ void write_pose_csv_py(const std::string& path, const py::dict& cols, std::size_
 }
 
 }  // namespace
-}  // namespace bsp::py_bind
 
 BSP_BINDING(csv) {
-  using namespace bsp::py_bind;
-  namespace py = pybind11;
   m.def("read_pose_csv", &read_pose_csv_py, py::arg("path"), py::arg("columns"),
         py::arg("threads"), py::arg("check_duplicates"),
         "Parse a data.csv (columns: [] = all) -> dict(path, rows, line, columns, "
@@ -113,3 +110,5 @@ BSP_BINDING(csv) {
       py::cast(std::vector<std::string>(bsp::kPoseCsvColumns.begin(), bsp::kPoseCsvColumns.end()));
   m.attr("CSV_CROSSING_ALIAS") = py::str(bsp::kCrossingAlias);
 }
+
+}  // namespace bsp::py_bind

@@ -128,11 +128,8 @@ CArray<bool> in_frame(const CArray<double>& uv, double width, double height) {
 }
 
 }  // namespace
-}  // namespace bsp::py_bind
 
 BSP_BINDING(geometry) {
-  using namespace bsp::py_bind;
-  namespace py = pybind11;
   namespace sk = bsp::skeleton;
   m.def("rotation_matrix", &rotation_matrix, py::arg("pyr"),
         "(..., 3) [pitch, yaw, roll] degrees -> (..., 3, 3) CARLA rotation matrices.");
@@ -156,3 +153,5 @@ BSP_BINDING(geometry) {
   m.attr("PARENTS") = py::cast(std::vector<int>(sk::kParents.begin(), sk::kParents.end()));
   m.attr("FLIP_PERMUTATION") = py::cast(std::vector<int>(sk::kFlip.begin(), sk::kFlip.end()));
 }
+
+}  // namespace bsp::py_bind

@@ -82,42 +82,39 @@ py::object apng_palette(const ApngReader& r) {
   return std::move(out);
 }
 
-}  // namespace
-}  // namespace bsp::py_bind
+// What the two writers bind alike: close (GIL released), frames_written and path.
+template <class Writer>
+void writer_tail(py::class_<Writer> c, const char* close_doc, const char* written_doc) {
+  c.def("close", &Writer::close, py::call_guard<py::gil_scoped_release>(), close_doc)
+      .def_property_readonly("frames_written", &Writer::frames_written, written_doc)
+      .def_property_readonly("path", &Writer::path, "Final path of the file.");
+}
 
-BSP_BINDING(media) {
-  using namespace bsp::py_bind;
-  namespace py = pybind11;
-  using bsp::ApngWriter;
-  using bsp::VideoWriter;
-
-  py::class_<VideoWriter>(m, "VideoWriter", "H.264/MP4 writer (RGB frames in).")
+void bind_writers(py::module_& m) {
+  auto video = py::class_<VideoWriter>(m, "VideoWriter", "H.264/MP4 writer (RGB frames in).")
       .def(py::init<std::string, int, int, double, std::int64_t, std::string, int>(),
            py::arg("path"), py::arg("width"), py::arg("height"), py::arg("fps") = 30.0,
            py::arg("bitrate") = 1'000'000, py::arg("preset") = "veryfast", py::arg("threads") = 1,
            "Opens <path>.tmp-*; close() renames it to path.")
       .def("write", &video_write, py::arg("frames"),
-           "Encodes (H, W, 3) or (K, H, W, 3) uint8 RGB frames (GIL released).")
-      .def("close", &VideoWriter::close, py::call_guard<py::gil_scoped_release>(),
-           "Flushes the encoder, writes the trailer and renames the file into place.")
-      .def_property_readonly("frames_written", &VideoWriter::frames_written,
-                             "Frames encoded so far.")
-      .def_property_readonly("path", &VideoWriter::path, "Final path of the file.");
+           "Encodes (H, W, 3) or (K, H, W, 3) uint8 RGB frames (GIL released).");
+  writer_tail(video, "Flushes the encoder, writes the trailer and renames the file into place.",
+              "Frames encoded so far.");
 
-  py::class_<ApngWriter>(m, "ApngWriter", "Palette-indexed APNG writer (tag frames in).")
+  auto apng =
+      py::class_<ApngWriter>(m, "ApngWriter", "Palette-indexed APNG writer (tag frames in).")
       .def(py::init(&make_apng_writer), py::arg("path"), py::arg("width"), py::arg("height"),
            py::arg("palette"), py::arg("fps") = 30.0, py::arg("drop_duplicates") = false,
            py::arg("level") = 6, "Opens <path>.tmp-*; close() renames it to path.")
       .def("write", &apng_write, py::arg("frames"),
            "Appends (H, W) or (K, H, W) uint8 palette-index frames (GIL released).")
-      .def("close", &ApngWriter::close, py::call_guard<py::gil_scoped_release>(),
-           "Stores the last frame, patches acTL and renames the file into place.")
-      .def_property_readonly("frames_written", &ApngWriter::frames_written,
-                             "Frames passed to write().")
       .def_property_readonly("frames_stored", &ApngWriter::frames_stored,
-                             "APNG frames after dropping duplicates.")
-      .def_property_readonly("path", &ApngWriter::path, "Final path of the file.");
+                             "APNG frames after dropping duplicates.");
+  writer_tail(apng, "Stores the last frame, patches acTL and renames the file into place.",
+              "Frames passed to write().");
+}
 
+void bind_readers(py::module_& m) {
   py::class_<bsp::VideoReader>(m, "VideoReader", "Threaded video decoder (RGB frames out).")
       .def(py::init<std::string, int>(), py::arg("path"), py::arg("threads") = 0,
            py::call_guard<py::gil_scoped_release>(),
@@ -150,10 +147,18 @@ BSP_BINDING(media) {
       .def("video_to_apng_frames", &bsp::ApngReader::video_to_apng_frames,
            py::arg("n_video_frames"), py::arg("fps"),
            "APNG frame shown at each video frame's time k / fps (-1 after the animation).");
+}
 
+}  // namespace
+
+BSP_BINDING(media) {
+  bind_writers(m);
+  bind_readers(m);
   std::vector<std::string> names(bsp::kTagNames.begin(), bsp::kTagNames.end());
   std::vector<std::array<std::uint8_t, 3>> colors(bsp::kCityscapesColors.begin(),
                                                   bsp::kCityscapesColors.end());
   m.attr("TAG_NAMES") = py::cast(names);
   m.attr("CITYSCAPES_COLORS") = py::cast(colors);
 }
+
+}  // namespace bsp::py_bind

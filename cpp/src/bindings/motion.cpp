@@ -34,14 +34,13 @@ py::dict load_motion(const std::string& path, double fps, int index) {
 }
 
 }  // namespace
-}  // namespace bsp::py_bind
 
 BSP_BINDING(motion) {
-  using namespace bsp::py_bind;
-  namespace py = pybind11;
   m.def("load_motion", &load_motion, py::arg("path"), py::arg("fps") = 30.0,
         py::arg("index") = 0,
         "Reads an animation file through assimp (BVH, FBX, glTF, ...) -> dict(path, names, "
         "parents (N,) int32, rest (N,4,4), local (F,N,4,4) row-major local node transforms "
         "sampled at fps, fps, duration, animation). Raises MotionError.");
 }
+
+}  // namespace bsp::py_bind

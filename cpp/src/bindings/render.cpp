@@ -155,11 +155,8 @@ py::array_t<bool> body_visibility(const CArray<double>& road, const CArray<doubl
 }
 
 }  // namespace
-}  // namespace bsp::py_bind
 
 BSP_BINDING(render) {
-  using namespace bsp::py_bind;
-  namespace py = pybind11;
   m.def("render_background", &render_background, py::arg("road"), py::arg("bands"),
         py::arg("boxes"), py::arg("cylinders"), py::arg("spheres"), py::arg("light"),
         py::arg("camera"), py::arg("width"), py::arg("height"), py::arg("fov"),
@@ -188,3 +185,5 @@ BSP_BINDING(render) {
         "are cast. Arguments as render_background's, then capsules (F,P,7) as "
         "render_bodies'.");
 }
+
+}  // namespace bsp::py_bind

@@ -73,6 +73,13 @@ Handle simple_space(const std::vector<hsize_t>& shape) {
                 H5Sclose);
 }
 
+// The strings' C pointers, for HDF5's variable-length string writes.
+std::vector<const char*> c_strings(const std::vector<std::string>& values) {
+  std::vector<const char*> ptrs(values.size());
+  for (std::size_t i = 0; i < values.size(); ++i) ptrs[i] = values[i].c_str();
+  return ptrs;
+}
+
 }  // namespace
 
 std::string Group::where(const std::string& name) const {
@@ -131,8 +138,7 @@ void Group::write_chunk(const Handle& ds, const std::string& name,
 }
 
 void Group::write_strings(const std::string& name, const std::vector<std::string>& values) const {
-  std::vector<const char*> ptrs(values.size());
-  for (std::size_t i = 0; i < values.size(); ++i) ptrs[i] = values[i].c_str();
+  const std::vector<const char*> ptrs = c_strings(values);
   Handle type = str_type();
   Handle space = simple_space({values.size()});
   Handle ds(check(H5Dcreate2(h_.id(), name.c_str(), type.id(), space.id(), H5P_DEFAULT,
@@ -144,24 +150,21 @@ void Group::write_strings(const std::string& name, const std::vector<std::string
                  "cannot write " + where(name));
 }
 
-void Group::attr(const std::string& name, const std::string& value) const {
-  Handle type = str_type();
-  Handle space = scalar_space();
-  Handle a(check(H5Acreate2(h_.id(), name.c_str(), type.id(), space.id(), H5P_DEFAULT,
-                            H5P_DEFAULT),
+void Group::write_attr(const std::string& name, hid_t type, const Handle& space,
+                       const void* data) const {
+  Handle a(check(H5Acreate2(h_.id(), name.c_str(), type, space.id(), H5P_DEFAULT, H5P_DEFAULT),
                  "cannot create attribute " + where(name)),
            H5Aclose);
+  check_status(H5Awrite(a.id(), type, data), "cannot write attribute " + where(name));
+}
+
+void Group::attr(const std::string& name, const std::string& value) const {
   const char* p = value.c_str();
-  check_status(H5Awrite(a.id(), type.id(), &p), "cannot write attribute " + where(name));
+  write_attr(name, str_type().id(), scalar_space(), &p);
 }
 
 void Group::attr(const std::string& name, double value) const {
-  Handle space = scalar_space();
-  Handle a(check(H5Acreate2(h_.id(), name.c_str(), H5T_NATIVE_DOUBLE, space.id(), H5P_DEFAULT,
-                            H5P_DEFAULT),
-                 "cannot create attribute " + where(name)),
-           H5Aclose);
-  check_status(H5Awrite(a.id(), H5T_NATIVE_DOUBLE, &value), "cannot write attribute " + where(name));
+  write_attr(name, H5T_NATIVE_DOUBLE, scalar_space(), &value);
 }
 
 void Group::attr(const std::string& name, std::int64_t value) const {
@@ -169,25 +172,13 @@ void Group::attr(const std::string& name, std::int64_t value) const {
 }
 
 void Group::attr(const std::string& name, const std::vector<std::string>& values) const {
-  std::vector<const char*> ptrs(values.size());
-  for (std::size_t i = 0; i < values.size(); ++i) ptrs[i] = values[i].c_str();
-  Handle type = str_type();
-  Handle space = simple_space({values.size()});
-  Handle a(check(H5Acreate2(h_.id(), name.c_str(), type.id(), space.id(), H5P_DEFAULT,
-                            H5P_DEFAULT),
-                 "cannot create attribute " + where(name)),
-           H5Aclose);
-  check_status(H5Awrite(a.id(), type.id(), ptrs.data()), "cannot write attribute " + where(name));
+  const std::vector<const char*> ptrs = c_strings(values);
+  write_attr(name, str_type().id(), simple_space({values.size()}), ptrs.data());
 }
 
 void Group::attr(const std::string& name, const std::vector<std::int64_t>& values) const {
   Handle space = values.size() == 1 ? scalar_space() : simple_space({values.size()});
-  Handle a(check(H5Acreate2(h_.id(), name.c_str(), H5T_NATIVE_INT64, space.id(), H5P_DEFAULT,
-                            H5P_DEFAULT),
-                 "cannot create attribute " + where(name)),
-           H5Aclose);
-  check_status(H5Awrite(a.id(), H5T_NATIVE_INT64, values.data()),
-               "cannot write attribute " + where(name));
+  write_attr(name, H5T_NATIVE_INT64, space, values.data());
 }
 
 File File::create(const std::string& path) {

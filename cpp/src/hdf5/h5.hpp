@@ -101,6 +101,9 @@ class Group {
 
  private:
   std::string where(const std::string& name) const;
+  // Creates attribute `name` of `type` over `space` and writes `data` into it.
+  void write_attr(const std::string& name, hid_t type, const Handle& space,
+                  const void* data) const;
   Handle h_;
   std::string path_, file_;
 };
