@@ -23,7 +23,7 @@ import re
 import sys
 
 __all__ = ["did_you_mean", "unknown", "error_hint", "HelpFormatter", "ArgumentParser",
-           "EXIT", "exit_code", "run_command"]
+           "EXIT", "exit_code", "run_command", "BadInput"]
 
 #: the exit codes of every command (module docstring)
 EXIT = {"ok": 0, "failure": 1, "usage": 2, "exists": 3, "verify": 4, "interrupted": 130}
@@ -77,12 +77,15 @@ class ArgumentParser(argparse.ArgumentParser):
 def exit_code(prog: str, exc: BaseException):
     """Prints ``exc`` as one line ``PROG: message`` and returns its exit code, or None for
     an exception that is no command's error (a bug: the caller re-raises it). An error
-    that carries its own ``code`` (a run's, an interruption's) keeps it."""
+    that carries its own ``code`` (a run's, an interruption's, bad data's) keeps it; the C++
+    core's errors are named (``VideoDecodeError: ...``); an interruption says what it left
+    (``PROG: interrupted; MESSAGE``)."""
     from .atomic import OutputOverlapError, refuse
 
     if isinstance(exc, OutputOverlapError):
         return refuse(prog, exc)
     code = getattr(exc, "code", None)
+    text = str(exc).replace("\n", " ")
     if isinstance(code, int) and not isinstance(exc, SystemExit):
         pass
     elif isinstance(exc, FileExistsError):
@@ -90,15 +93,22 @@ def exit_code(prog: str, exc: BaseException):
     elif isinstance(exc, (ValueError, argparse.ArgumentTypeError)):
         code = EXIT["usage"]
     elif isinstance(exc, KeyboardInterrupt):
-        print(f"{prog}: interrupted", file=sys.stderr)
-        return EXIT["interrupted"]
+        code, text = EXIT["interrupted"], "interrupted" + (f"; {text}" if text else "")
     elif isinstance(exc, (ImportError, OSError)) or type(exc).__module__.startswith("bsp_fast"):
         code = EXIT["failure"]
     else:
         return None
-    text = str(exc).replace("\n", " ")
+    if type(exc).__module__ == f"{__package__}._core":
+        text = f"{type(exc).__name__}: {text}"
     print(f"{prog}: {text}", file=sys.stderr)
     return code
+
+
+class BadInput(Exception):
+    """An input file holds what the command cannot read (the message names the file and
+    what is missing or wrong): bad data, exit code 1."""
+
+    code = EXIT["failure"]
 
 
 def run_command(prog: str, fn, *args, **kwargs) -> int:

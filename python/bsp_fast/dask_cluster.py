@@ -57,25 +57,16 @@ def open_client(address: str, n_workers: int | None = None, needed_by: str = "bs
         yield client
 
 
-def run_on_scheduler(spec: str, prog: str, run) -> int:
+def run_on_scheduler(spec: str, prog: str, run):
     """A command's ``--scheduler SPEC``: ``run(None)`` for ``threads``, else ``run(client)``
-    on the Dask cluster. Exit codes: 2 for a bad SPEC, 1 when Dask is missing or the
-    cluster cannot be reached (the message printed after ``prog:``), else ``run``'s."""
-    import sys
-
-    try:
-        address = parse_scheduler(spec)
-    except ValueError as exc:
-        print(f"{prog}: {exc}", file=sys.stderr)
-        return 2
+    on the Dask cluster; returns what ``run`` returns. A bad SPEC is a ``ValueError``, a
+    missing Dask an ``ImportError`` and an unreachable cluster an ``OSError``, each for the
+    command's exit-code ladder (``command_line.run_command``: 2, 1, 1)."""
+    address = parse_scheduler(spec)
     if address is None:
         return run(None)
-    try:
-        with open_client(address, needed_by=f"{prog} --scheduler dask") as client:
-            return run(client)
-    except (ImportError, OSError) as exc:
-        print(f"{prog}: {exc}", file=sys.stderr)
-        return 1
+    with open_client(address, needed_by=f"{prog} --scheduler dask") as client:
+        return run(client)
 
 
 def worker_threads(default: int = 1) -> int:

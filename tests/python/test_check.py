@@ -159,7 +159,7 @@ def test_fix_writes_a_clean_byte_identical_copy_that_converts(broken, tmp_path):
     assert sum(conv["splits"][s]["clips"] for s in conv["splits"]) > 0
     # The source is untouched and --fix refuses to write into it or over an existing copy.
     assert main([str(ds), "--fix", str(ds / "x"), "--quiet"]) == 2
-    assert main([str(ds), "--fix", str(out), "--quiet"]) == 2
+    assert main([str(ds), "--fix", str(out), "--quiet"]) == 3  # exists: --force replaces it
 
 
 def test_unreferenced_and_event_camera_files(pristine, tmp_path):
@@ -197,9 +197,11 @@ def test_poses_only_dataset_is_not_missing_its_media(pristine, tmp_path):
 
 
 def test_bad_arguments_and_unreadable_csv(tmp_path, capsys):
-    assert main([str(tmp_path / "nope")]) == 2
-    assert main(["--frobnicate", str(tmp_path)]) == 2
-    assert main([str(tmp_path), "--link"]) == 2
+    assert main([str(tmp_path / "nope")]) == 1  # a missing input, as for every command
+    for argv in (["--frobnicate", str(tmp_path)], [str(tmp_path), "--link"]):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == 2
     (tmp_path / "data.csv").write_text("id,frame.idx\nx,1\n")
     assert main([str(tmp_path), "--quiet"]) == 1
     rep = check_dataset(tmp_path)

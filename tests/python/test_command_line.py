@@ -75,6 +75,72 @@ def test_argument_errors_are_one_line_before_torch(tmp_path, command, argv, code
     assert got == code and expect in line and heavy == [], (got, heavy, err)
 
 
+# every command, one error class each: the same exit code (docs/architecture.md, "Exit codes")
+MISSING_INPUT = {"bsp-synth": ["out", "--config", "/nope.yaml"],
+                 "bsp-convert": ["/nope", "o.h5"],
+                 "bsp-train": ["lifting", "lstm", "--data", "/nope.h5"],
+                 "bsp-eval": ["/nope"], "bsp-predict": ["/nope", "--out", "p.h5"],
+                 "bsp-reproduce": ["classification", "--data", "/nope"],
+                 "bsp-preview": ["clips", "/nope.h5", "--out", "x.png"],
+                 "bsp-check": ["/nope"], "bsp-cache": ["where", "/nope"],
+                 "bsp-interop": ["export", "coco", "/nope.h5", "o.json"]}
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_every_command_a_missing_input_is_1_and_a_bad_option_2(tmp_path, command):
+    assert sorted(MISSING_INPUT) == sorted(COMMANDS)
+    got, heavy, err = _probe(COMMANDS[command], MISSING_INPUT[command], cwd=tmp_path)
+    line = _one_line_error(err)
+    assert (got, heavy) == (1, []) and line.startswith(f"{command}: ") and "/nope" in line, err
+    got, heavy, err = _probe(COMMANDS[command], [*MISSING_INPUT[command], "--no-such-option"],
+                             cwd=tmp_path)
+    line = _one_line_error(err)
+    assert (got, heavy) == (2, []) and f"(see {command} --help)" in line, err
+
+
+def test_every_command_goes_through_the_one_ladder():
+    """Each command's main() hands its work to command_line.run_command."""
+    import ast
+    import importlib
+
+    for command, module in COMMANDS.items():
+        source = Path(importlib.import_module(module).__file__).read_text()
+        main = next(n for n in ast.parse(source).body
+                    if isinstance(n, ast.FunctionDef) and n.name == "main")
+        calls = {c.func.id for c in ast.walk(main)
+                 if isinstance(c, ast.Call) and isinstance(c.func, ast.Name)}
+        assert "run_command" in calls, command
+
+
+def test_the_ladder_maps_each_error_class_to_its_code(capsys):
+    import bsp_fast
+    from bsp_fast.atomic import OutputOverlapError
+    from bsp_fast.command_line import EXIT, BadInput, exit_code
+    from bsp_fast.conversion import BadDataset
+
+    cases = [(ValueError("bad value"), EXIT["usage"]), (OutputOverlapError("o"), EXIT["usage"]),
+             (FileNotFoundError("/nope: no such file"), EXIT["failure"]),
+             (OSError("disk full"), EXIT["failure"]), (ImportError("no cv2"), EXIT["failure"]),
+             (BadInput("x.h5: no group"), EXIT["failure"]),
+             (BadDataset("config.yaml"), EXIT["failure"]),
+             (bsp_fast.VideoDecodeError("a.mp4: broken"), EXIT["failure"]),
+             (FileExistsError("out exists"), EXIT["exists"]),
+             (KeyboardInterrupt(), EXIT["interrupted"])]
+    for exc, code in cases:
+        assert exit_code("bsp-x", exc) == code, exc
+        line = _one_line_error(capsys.readouterr().err)
+        assert line.startswith("bsp-x: "), line
+    stopped = KeyboardInterrupt("terminated; no output written")
+    stopped.code = 143
+    assert exit_code("bsp-x", stopped) == 143
+    assert capsys.readouterr().err == "bsp-x: terminated; no output written\n"
+    exit_code("bsp-x", bsp_fast.VideoDecodeError("a.mp4: broken"))
+    assert capsys.readouterr().err == "bsp-x: VideoDecodeError: a.mp4: broken\n"
+    exit_code("bsp-x", KeyboardInterrupt("no output written"))
+    assert capsys.readouterr().err == "bsp-x: interrupted; no output written\n"
+    assert exit_code("bsp-x", RuntimeError("a bug")) is None  # re-raised by run_command
+
+
 def test_output_equal_to_its_input_is_refused_before_torch(tmp_path):
     (tmp_path / "x.h5").write_bytes(b"")
     got, heavy, err = _probe(COMMANDS["bsp-train"],

@@ -190,7 +190,7 @@ def test_cli_exit_codes(sample, tmp_path, capsys):
     assert main(["frames", str(sample / "ds"), "--recording", "0", "--out", str(out),
                  "--frames", "10"]) == 0
     assert "wrote" in capsys.readouterr().out
-    assert main(["frames", str(sample / "ds"), "--recording", "0", "--out", str(out)]) == 2
+    assert main(["frames", str(sample / "ds"), "--recording", "0", "--out", str(out)]) == 3
     assert "exists" in capsys.readouterr().err
     assert main(["frames", str(sample / "ds"), "--recording", "nope", "--out",
                  str(tmp_path / "y.png")]) == 2
@@ -198,8 +198,10 @@ def test_cli_exit_codes(sample, tmp_path, capsys):
     assert main(["clips", str(sample / "clips.h5"), "--out", str(tmp_path / "y.gif")]) == 2
     assert main(["pose3d", str(sample / "clips.h5"), "--clip", "9999", "--out",
                  str(tmp_path / "y.png")]) == 2
-    assert main(["--help"]) == 0
-    assert main(["frames"]) == 2
+    for argv, code in ((["--help"], 0), (["frames"], 2)):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == code
 
 
 # ---------------------------------------------------------------- issue 28, item 11

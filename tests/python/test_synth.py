@@ -325,7 +325,7 @@ def test_cli_exit_codes(tmp_path, capsys):
     assert cli_main(args + ["--force"]) == 0
     assert cli_main([str(tmp_path / "p"), "--size", "63x48", "--quiet"]) == 2
     assert "even" in capsys.readouterr().err
-    assert cli_main([str(tmp_path / "q"), "--motion", str(tmp_path / "none.bvh")]) == 2
+    assert cli_main([str(tmp_path / "q"), "--motion", str(tmp_path / "none.bvh")]) == 1
     with pytest.raises(SystemExit) as e:
         cli_main(["--help"])
     assert e.value.code == 0

@@ -4,10 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..command_line import ArgumentParser
-from ..atomic import DATASET_FILES, OutputOverlapError, check_outputs, refuse
-
-EXIT_CLEAN, EXIT_PROBLEMS, EXIT_USAGE = 0, 1, 2
+from ..atomic import DATASET_FILES, check_outputs
+from ..command_line import EXIT, ArgumentParser, run_command
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -22,10 +20,11 @@ def build_parser() -> argparse.ArgumentParser:
                     "statistics table (scenes, annotated and crossing frames per age and "
                     "gender, annotated share). Each segmentation file is decoded once, files "
                     "spread over threads.",
-        epilog="Exit codes: 0 no errors (warnings alone, e.g. occluded rows, exit 0; "
-               "--strict makes them 1), 1 errors found (or data.csv unreadable), 2 bad "
-               "arguments (missing dataset, --fix directory exists or overlaps the dataset, "
-               "--json or --fix is one of the dataset's files, or both are one path). "
+        epilog="Exit codes (docs/architecture.md): 0 no errors (warnings alone, e.g. "
+               "occluded rows, exit 0; --strict makes them 1), 1 errors found (or no such "
+               "dataset, or data.csv unreadable), 2 bad arguments (--fix overlaps the "
+               "dataset, --json or --fix is one of the dataset's files, or both are one "
+               "path), 3 the --fix directory exists (--force replaces it), 130 interrupted. "
                "Gaps in frame.idx and event-camera files are notes, not problems.")
     p.add_argument("dataset", metavar="DATASET",
                    help="dataset directory holding data.csv (or the data.csv itself)")
@@ -53,32 +52,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:
-        return EXIT_USAGE if e.code else EXIT_CLEAN
+    args = parser.parse_args(argv)
+    if (args.link or args.force) and not args.fix:
+        parser.error("--link and --force only apply with --fix")
+    return run_command("bsp-check", _main, args)
+
+
+def _main(args) -> int:
     from . import check_dataset, fix_dataset, format_report, to_json
 
-    if (args.link or args.force) and not args.fix:
-        print("bsp-check: --link and --force only apply with --fix", file=sys.stderr)
-        return EXIT_USAGE
-    try:
-        _check_outputs(args)
-    except OutputOverlapError as e:
-        return refuse("bsp-check", e)
-    try:
-        if args.fix:
-            report = fix_dataset(args.dataset, args.fix, threads=args.threads,
-                                 force=args.force, link=args.link, progress=not args.quiet)
-        else:
-            report = check_dataset(args.dataset, threads=args.threads,
-                                   progress=not args.quiet)
-    except (FileNotFoundError, FileExistsError, ValueError) as e:
-        print(f"bsp-check: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("bsp-check: interrupted", file=sys.stderr)
-        return 130
+    _check_outputs(args)
+    if args.fix:
+        report = fix_dataset(args.dataset, args.fix, threads=args.threads, force=args.force,
+                             link=args.link, progress=not args.quiet)
+    else:
+        report = check_dataset(args.dataset, threads=args.threads, progress=not args.quiet)
     if args.json:
         to_json(report, args.json)
     text = format_report(report)
@@ -110,7 +98,7 @@ def exit_code(report: dict, strict: bool = False) -> int:
     """0 without errors (and, with ``strict``, without warnings), else 1: warnings alone
     pass, as in linters and test runners."""
     failing = report["counts"]["error"] + (report["counts"]["warning"] if strict else 0)
-    return EXIT_PROBLEMS if failing else EXIT_CLEAN
+    return EXIT["failure"] if failing else EXIT["ok"]
 
 
 if __name__ == "__main__":

@@ -7,13 +7,11 @@ import sys
 import threading
 import warnings
 
-from ..command_line import ArgumentParser, HelpFormatter
 from .._native import core as _core
-from ..atomic import OutputOverlapError, refuse
+from ..command_line import EXIT, ArgumentParser, BadInput, HelpFormatter, run_command
 from ..dask_cluster import SCHEDULER_HELP, run_on_scheduler
 from ..defaults import CONVERT, CROP_BOXES
 from .api import convert
-from .errors import BadDataset, UnusableConversion
 from .report import format_report, verify_table
 
 __all__ = ["main"]
@@ -31,7 +29,8 @@ def _parser() -> argparse.ArgumentParser:
         prog="bsp-convert",
         description="Convert a CARLA-BSP dataset (data.csv + clips/) into train/val/test clips "
                     "in one HDF5 file.",
-        epilog="Exit codes: 0 success, 1 bad input, I/O error, or (--strict) an unusable "
+        epilog="Exit codes (docs/architecture.md): 0 success, 1 bad input, I/O error, or "
+               "(--strict) an unusable "
                "result, 2 bad arguments, 3 output exists (use --force), 4 --verify found "
                "recordings beyond tolerance, 130 interrupted.",
         formatter_class=HelpFormatter)
@@ -122,9 +121,11 @@ def _media_options(p) -> None:
 class _Terminated(KeyboardInterrupt):
     """SIGTERM, raised in the main thread so that the temporary output is removed."""
 
+    code = 143
+
 
 def _on_sigterm(signum, frame):
-    raise _Terminated()
+    raise _Terminated("terminated; no output written")
 
 
 def main(argv=None) -> int:
@@ -134,10 +135,7 @@ def main(argv=None) -> int:
     in_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main else None
     try:
-        return _main(args)
-    except _Terminated:
-        print("bsp-convert: terminated; no output written", file=sys.stderr)
-        return 143
+        return run_command("bsp-convert", _main, args)
     finally:
         if in_main:
             signal.signal(signal.SIGTERM, previous)
@@ -151,8 +149,6 @@ def _main(args) -> int:
     try:  # before a cluster is started (convert() checks again)
         root, csv = dataset_csv(args.dataset)
         refuse_inputs_as_output(root, csv, Path(args.output))
-    except OutputOverlapError as exc:
-        return refuse("bsp-convert", exc)
     except FileNotFoundError:
         pass  # convert() says so
     return run_on_scheduler(args.scheduler, "bsp-convert", lambda c: _convert_cli(args, c))
@@ -160,8 +156,7 @@ def _main(args) -> int:
 
 def _convert_cli(args, client) -> int:
     if client is None and args.shards is not None:
-        print("bsp-convert: --shards needs --scheduler dask", file=sys.stderr)
-        return 2
+        raise ValueError("--shards needs --scheduler dask")
     try:
         with warnings.catch_warnings():  # printed below, once, in the summary
             warnings.simplefilter("ignore", UserWarning)
@@ -177,27 +172,16 @@ def _convert_cli(args, client) -> int:
                 crop_box=args.crop_box, crop_context=args.crop_context,
                 progress=False if args.quiet else None, strict=args.strict, client=client,
                 shards=args.shards)
-    except OutputOverlapError as exc:  # an output that is an input: exit 2
-        return refuse("bsp-convert", exc)
-    except FileExistsError as exc:
-        print(f"bsp-convert: {exc}", file=sys.stderr)
-        return 3
-    except (UnusableConversion, BadDataset) as exc:
-        print(f"bsp-convert: {exc}", file=sys.stderr)
-        return 1
-    except ValueError as exc:
-        print(f"bsp-convert: {exc}", file=sys.stderr)
-        return 2
-    except _Terminated:
+    except (_Terminated, FileExistsError):
         raise
     except KeyboardInterrupt:
-        print("bsp-convert: interrupted; no output written", file=sys.stderr)
-        return 130
+        raise KeyboardInterrupt("no output written") from None
     except (OSError, _core.Error) as exc:
-        hint = ("; convert without the media (--no-media) or leave such recordings out "
-                "(--skip-bad-media)" if _media_error(exc) else "")
-        print(f"bsp-convert: {type(exc).__name__}: {exc}{hint}", file=sys.stderr)
-        return 1
+        if _media_error(exc):
+            raise BadInput(f"{type(exc).__name__}: {exc}; convert without the media "
+                           "(--no-media) or leave such recordings out "
+                           "(--skip-bad-media)") from exc
+        raise
     if not args.quiet:
         print(format_report(report))
         if args.verify:
@@ -207,8 +191,8 @@ def _convert_cli(args, client) -> int:
         for w in report["warnings"]:
             print(f"bsp-convert: WARNING: {w}", file=sys.stderr)
     if args.verify and report["verify_failed"]:
-        return 4
-    return 0
+        return EXIT["verify"]
+    return EXIT["ok"]
 
 
 if __name__ == "__main__":

@@ -15,10 +15,8 @@ import sys
 import time
 from pathlib import Path
 
-from ..command_line import ArgumentParser
+from ..command_line import ArgumentParser, run_command
 from . import cache as C
-
-EXIT_OK, EXIT_USAGE = 0, 2
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,7 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "used; remove the least recently used ones.",
         epilog="The cache of DATASET is DATASET/bsp_fast-cache when the dataset directory is "
                "writable, else $XDG_CACHE_HOME/bsp_fast/<name>-<hash> (~/.cache by default). "
-               "Exit codes: 0 done, 2 bad arguments (no such dataset). docs: docs/data.md")
+               "Exit codes (docs/architecture.md): 0 done, 1 no such dataset or an unreadable "
+               "cache, 2 bad arguments. docs: docs/data.md")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     ls = sub.add_parser("ls", help="list cached files, least recently used first",
                         description="List the cached files of each DATASET (none given: every "
@@ -104,42 +103,26 @@ def _xdg_folders() -> list:
 
 def main(argv=None) -> int:
     parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:
-        return EXIT_USAGE if e.code else EXIT_OK
-    try:
-        if args.command == "ls":
-            if args.cache_dir:
-                folders = [Path(args.cache_dir)]
-            elif args.datasets:
-                folders = [_folder(d, None) for d in args.datasets]
-            else:
-                folders = _xdg_folders()
-                if not folders:
-                    print("bsp-cache: no cache under $XDG_CACHE_HOME/bsp_fast; give a "
-                          "DATASET to see the cache inside it")
-            for folder in folders:
-                list_folder(folder)
-            return EXIT_OK
-        folder = _folder(args.datasets[0], args.cache_dir)
-        if args.command == "where":
-            print(folder)
-            return EXIT_OK
+    args = parser.parse_args(argv)
+    if args.command == "prune":
         chosen = [x for x in (args.max_size is not None, args.keep is not None, args.all) if x]
         if not chosen:
-            print("bsp-cache prune: say what to keep: --max-size SIZE, --keep N or --all",
-                  file=sys.stderr)
-            return EXIT_USAGE
+            parser.error("prune: say what to keep: --max-size SIZE, --keep N or --all")
         if args.all and len(chosen) > 1:
-            print("bsp-cache prune: --all removes everything; it takes no --max-size or --keep",
-                  file=sys.stderr)
-            return EXIT_USAGE
-        limit = None if args.max_size is None else C.parse_bytes(args.max_size)
-        removed = C.prune(folder, max_bytes=limit, keep=args.keep, dry_run=args.dry_run)
-    except (FileNotFoundError, ValueError) as exc:
-        print(f"bsp-cache: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+            parser.error("prune: --all removes everything; it takes no --max-size or --keep")
+    return run_command("bsp-cache", _main, args)
+
+
+def _main(args) -> None:
+    if args.command == "ls":
+        _list(args)
+        return
+    folder = _folder(args.datasets[0], args.cache_dir)
+    if args.command == "where":
+        print(folder)
+        return
+    limit = None if args.max_size is None else C.parse_bytes(args.max_size)
+    removed = C.prune(folder, max_bytes=limit, keep=args.keep, dry_run=args.dry_run)
     verb = "would remove" if args.dry_run else "removed"
     for e in removed:
         print(f"{verb} {e['path'].name} ({C.format_bytes(e['bytes'])})")
@@ -150,7 +133,22 @@ def main(argv=None) -> int:
     print(f"{folder}: {len(removed)} file(s) {verb}, "
           f"{C.format_bytes(sum(e['bytes'] for e in removed))}; {n} left, "
           f"{C.format_bytes(size)}")
-    return EXIT_OK
+
+
+def _list(args) -> None:
+    """``bsp-cache ls``: the given datasets' caches, or every cache under
+    $XDG_CACHE_HOME/bsp_fast."""
+    if args.cache_dir:
+        folders = [Path(args.cache_dir)]
+    elif args.datasets:
+        folders = [_folder(d, None) for d in args.datasets]
+    else:
+        folders = _xdg_folders()
+        if not folders:
+            print("bsp-cache: no cache under $XDG_CACHE_HOME/bsp_fast; give a DATASET to "
+                  "see the cache inside it")
+    for folder in folders:
+        list_folder(folder)
 
 
 if __name__ == "__main__":

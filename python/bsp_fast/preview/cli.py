@@ -3,9 +3,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from ..command_line import ArgumentParser
 
-EXIT_OK, EXIT_ERROR, EXIT_USAGE = 0, 1, 2
+from ..command_line import ArgumentParser, BadInput, run_command
 
 
 def _ints(text: str) -> list:
@@ -31,10 +30,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "and segmentation, a contact sheet of converted clips, a clip's 3D "
                     "skeleton, or predictions against the ground truth. Bones are coloured "
                     "by side: left blue, right orange, centre green.",
-        epilog="Exit codes: 0 written, 1 unreadable input (media, HDF5) or the 'preview' "
-               "extra (OpenCV, matplotlib) not installed, 2 bad arguments "
-               "(unknown recording or clip, OUT exists without --force, wrong extension, OUT "
-               "is one of the inputs, --force or not). "
+        epilog="Exit codes (docs/architecture.md): 0 written, 1 a missing or unreadable "
+               "input (media, HDF5) or the 'preview' extra (OpenCV, matplotlib) not "
+               "installed, 2 bad arguments (unknown recording or clip, wrong extension, OUT "
+               "is one of the inputs, --force or not), 3 OUT exists (--force replaces it). "
                "Details: docs/preview.md.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -177,32 +176,34 @@ def _check_outputs(args) -> None:
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:
-        return EXIT_USAGE if e.code else EXIT_OK
-    from .._native import core
-    from ..atomic import OutputOverlapError, refuse
+    args = build_parser().parse_args(argv)
+    return run_command("bsp-preview", _main, args)
 
-    try:
-        _check_outputs(args)
-    except OutputOverlapError as e:
-        return refuse("bsp-preview", e)
+
+def _check_inputs(args) -> None:
+    """Each input exists (a missing one is exit 1, named, before any file is opened)."""
+    from pathlib import Path
+
+    if args.command == "frames":
+        from ..conversion.inputs import dataset_csv
+
+        dataset_csv(args.dataset)
+    for path in (getattr(args, "preds_h5", None), getattr(args, "clips_h5", None)):
+        if path is not None and not Path(path).is_file():
+            raise FileNotFoundError(f"{path}: no such file")
+
+
+def _main(args) -> None:
+    _check_outputs(args)  # the output rule first, as every command: an input is never OUT
+    _check_inputs(args)
     try:
         res = _run(args)
-    except ImportError as e:  # an optional dependency: the message names the extra
-        print(f"bsp-preview: {e}", file=sys.stderr)
-        return EXIT_ERROR
-    except (ValueError, FileNotFoundError, FileExistsError) as e:
-        print(f"bsp-preview: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    except (core.Error, OSError, KeyError) as e:
-        print(f"bsp-preview: {type(e).__name__}: {e}", file=sys.stderr)
-        return EXIT_ERROR
+    except KeyError as exc:  # h5py: an input file without a group or dataset it needs
+        name = getattr(args, "preds_h5", None) or getattr(args, "clips_h5", None) \
+            or args.dataset
+        raise BadInput(f"{name}: {exc.args[0] if exc.args else exc}") from exc
     w, h = res["size"]
     print(f"wrote {res['path']} ({w}x{h}, {res['frames']} frame(s))")
-    return EXIT_OK
 
 
 if __name__ == "__main__":

@@ -3,9 +3,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from ..command_line import ArgumentParser
 
-EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_EXISTS, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+from ..command_line import ArgumentParser, run_command
 
 
 def _preset(name: str) -> str:
@@ -24,9 +23,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "clips/<id>-1.apng segmentation, config.yaml) without a simulator: a "
                     "procedural street, one walking pedestrian per clip, a static camera "
                     "placed as the original recorder did.",
-        epilog="Exit codes: 0 success, 1 generation error, 2 bad option or config (or "
-               "OUT_DIR is or holds the --config or --motion file, --force or not), 3 OUT_DIR "
-               "exists (use --force), 130 interrupted.")
+        epilog="Exit codes (docs/architecture.md): 0 success, 1 a generation error or a "
+               "missing or unreadable --config or --motion file, 2 bad option or config "
+               "value (or OUT_DIR is or holds the --config or --motion file, --force or "
+               "not), 3 OUT_DIR exists (use --force), 130 interrupted.")
     p.add_argument("out_dir", metavar="OUT_DIR", help="output directory (must not exist "
                    "unless --force); built as .OUT_DIR.tmp-* and renamed when complete")
     p.add_argument("--preset", choices=("sample", "medium", "full"), default="sample",
@@ -95,21 +95,21 @@ def _print_summary(s: dict) -> None:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    from ..atomic import OutputOverlapError, check_outputs, refuse
+    return run_command("bsp-synth", _main, args)
+
+
+def _main(args) -> int:
+    from ..atomic import check_outputs
     from ..dask_cluster import run_on_scheduler
 
-    try:  # before any work: OUT_DIR (replaced whole with --force) holds no input
-        check_outputs(inputs=[("the --config file", args.config),
-                              ("the --motion file", args.motion)],
-                      outputs=[("OUT_DIR", args.out_dir)])
-    except OutputOverlapError as e:
-        return refuse("bsp-synth", e)
-
+    # before any work: OUT_DIR (replaced whole with --force) holds no input
+    check_outputs(inputs=[("the --config file", args.config),
+                          ("the --motion file", args.motion)],
+                  outputs=[("OUT_DIR", args.out_dir)])
     return run_on_scheduler(args.scheduler, "bsp-synth", lambda c: _generate(args, c))
 
 
-def _generate(args, client) -> int:
-    from .._native import core
+def _generate(args, client) -> None:
     from .generate import generate
 
     try:
@@ -120,21 +120,10 @@ def _generate(args, client) -> int:
                            poses_only=args.poses_only,
                            bone_length_variation=args.bone_length_variation, force=args.force,
                            progress=not args.quiet, client=client)
-    except FileExistsError as e:
-        print(f"bsp-synth: {e}", file=sys.stderr)
-        return EXIT_EXISTS
-    except (ValueError, FileNotFoundError) as e:
-        print(f"bsp-synth: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    except core.Error as e:
-        print(f"bsp-synth: {type(e).__name__}: {e}", file=sys.stderr)
-        return EXIT_ERROR
     except KeyboardInterrupt:
-        print("bsp-synth: interrupted; nothing written to OUT_DIR", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        raise KeyboardInterrupt("nothing written to OUT_DIR") from None
     if not args.quiet:
         _print_summary(summary)
-    return EXIT_OK
 
 
 if __name__ == "__main__":
