@@ -80,6 +80,31 @@ def _run_shards(client, csv, folder, count, options, exclude):
         raise
 
 
+def _run_until_clean(client, csv, tmp_dir: Path, shards: int, options: dict, relabel):
+    """Runs the shards until none fails: each pass plans again without the media files
+    the last one could not use (as the one-process converter does), or raises the first
+    failure unless ``skip_bad_media``. Returns the reports and the writes counted as the
+    one-process converter counts them."""
+    exclude: list = []
+    passes = 1
+    while True:
+        reports = _run_shards(client, csv, tmp_dir.absolute(), shards, options, exclude)
+        failures = sorted((f for r in reports for f in r["shard_failures"]),
+                          key=lambda f: (int(f["phase"]), f["order"]))
+        for f in failures:
+            f["path"], f["reason"] = relabel(f["path"]), relabel(f["reason"])
+        if not failures:
+            return reports, passes
+        if not options.get("skip_bad_media"):
+            _raise_failure(failures[0])
+        for f in failures:
+            exclude.append((*f["recording"], f["path"], f["reason"]))
+        # found only while decoding: the one-process converter had written the file
+        passes += any(f["phase"] == _core.FailurePhase.decode for f in failures)
+        for p in tmp_dir.iterdir():
+            p.unlink()
+
+
 def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
                     strict=False, root=None, force=False) -> dict:
     """Converts on ``client``'s workers; ``options`` as for ``_core.convert_csv``. Writes
@@ -102,24 +127,7 @@ def convert_sharded(csv: str, out: Path, options: dict, client, *, shards=None,
     final_dir = shard_dir(out)
     try:
         tmp_dir.mkdir(parents=True)
-        exclude: list = []
-        passes = 1  # writes, as the one-process converter counts them
-        while True:
-            reports = _run_shards(client, csv, tmp_dir.absolute(), shards, options, exclude)
-            failures = sorted((f for r in reports for f in r["shard_failures"]),
-                              key=lambda f: (int(f["phase"]), f["order"]))
-            for f in failures:
-                f["path"], f["reason"] = relabel(f["path"]), relabel(f["reason"])
-            if not failures:
-                break
-            if not options.get("skip_bad_media"):
-                _raise_failure(failures[0])
-            for f in failures:  # plan again without them, as the one-process converter does
-                exclude.append((*f["recording"], f["path"], f["reason"]))
-            # found only while decoding: the one-process converter had written the file
-            passes += any(f["phase"] == _core.FailurePhase.decode for f in failures)
-            for p in tmp_dir.iterdir():
-                p.unlink()
+        reports, passes = _run_until_clean(client, csv, tmp_dir, shards, options, relabel)
         report = _merge(reports, passes, shards, time.perf_counter() - t0)
         report["media"]["enabled"] = bool(options.get("media", True))
         report["warnings"] = problems(report)

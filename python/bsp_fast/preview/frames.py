@@ -103,12 +103,7 @@ def preview_frames(dataset, recording, out=None, *, frames=None, layout: str = "
     returns the pictures. Returns {path, format, frames, size, recording, frame_idx,
     images (only when out is None)}.
     """
-    if layout not in LAYOUTS:
-        raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}; got {layout!r}")
-    if not (0.0 <= float(alpha) <= 1.0):
-        raise ValueError(f"alpha must be in [0, 1], got {alpha}")
-    if not (0.0 < float(scale) <= 8.0):
-        raise ValueError(f"scale must be in (0, 8], got {scale}")
+    _check_style(layout, alpha, scale)
     fmt = output_format(out) if out is not None else "png"
     if out is not None:
         check_output(out, force)
@@ -120,35 +115,19 @@ def preview_frames(dataset, recording, out=None, *, frames=None, layout: str = "
     seg = ApngReader(os.path.join(root, table["camera.semantic_segmentation"][rows[0]]))
     fidx = table["frame.idx"][rows]
     n_video = len(video)
-    sel = parse_frames(frames, n_video) if frames is not None else \
-        _default_frames(fmt, fidx, n_video)
-    bad = sel[(sel < 0) | (sel >= n_video)]
-    if len(bad):
-        raise ValueError(f"frame {int(bad[0])} outside the video's 0..{n_video - 1}")
-    if not len(sel):
-        raise ValueError("nothing to draw: no frames selected")
+    sel = _frame_selection(frames, fmt, fidx, n_video)
     rate = float(read_config(root).get("fps", video.fps or 30.0))
     to_apng = seg.video_to_apng_frames(n_video, rate)
     by_frame = {int(f): r for f, r in zip(fidx, rows)}
     uvs, cross = table["frame.pedestrian.pose.camera"], table[CROSSING]
-    blank = np.zeros(seg.size[::-1], np.uint8)
+
+    def panel(rgb, tag, f: int):
+        r = by_frame.get(f)
+        return _panel(rgb, tag, None if r is None else uvs[r],
+                      None if r is None else bool(cross[r]), f, rid, layout, alpha, scale)
 
     def pictures():
-        for start in range(0, len(sel), 16):
-            chunk = sel[start:start + 16]
-            rgbs = video.read(chunk)
-            ap = to_apng[chunk]
-            tags = seg.read(ap[ap >= 0]) if (ap >= 0).any() else None
-            t = 0
-            for k, f in enumerate(chunk):
-                if ap[k] >= 0:
-                    tag, t = tags[t], t + 1
-                else:
-                    tag = blank
-                r = by_frame.get(int(f))
-                yield _panel(rgbs[k], tag, None if r is None else uvs[r],
-                             None if r is None else bool(cross[r]), int(f), rid, layout,
-                             alpha, scale)
+        return _pictures(video, seg, to_apng, sel, panel)
 
     info = {"recording": rid, "frame_idx": [int(f) for f in sel]}
     if out is None:
@@ -158,3 +137,43 @@ def preview_frames(dataset, recording, out=None, *, frames=None, layout: str = "
     else:
         result = save(out, pictures(), fps=fps or 30.0)
     return dict(result, **info)
+
+
+def _check_style(layout: str, alpha: float, scale: float) -> None:
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}; got {layout!r}")
+    if not (0.0 <= float(alpha) <= 1.0):
+        raise ValueError(f"alpha must be in [0, 1], got {alpha}")
+    if not (0.0 < float(scale) <= 8.0):
+        raise ValueError(f"scale must be in (0, 8], got {scale}")
+
+
+def _frame_selection(frames, fmt: str, fidx: np.ndarray, n_video: int) -> np.ndarray:
+    """The video frames to draw: ``frames`` parsed, or the format's default; each must be
+    in the video and at least one chosen."""
+    sel = parse_frames(frames, n_video) if frames is not None else \
+        _default_frames(fmt, fidx, n_video)
+    bad = sel[(sel < 0) | (sel >= n_video)]
+    if len(bad):
+        raise ValueError(f"frame {int(bad[0])} outside the video's 0..{n_video - 1}")
+    if not len(sel):
+        raise ValueError("nothing to draw: no frames selected")
+    return sel
+
+
+def _pictures(video, seg, to_apng: np.ndarray, sel: np.ndarray, panel):
+    """``panel(rgb, tags, frame)`` of each selected frame, decoding 16 frames at a time; a
+    frame shown after the animation's end gets an empty segmentation."""
+    blank = np.zeros(seg.size[::-1], np.uint8)
+    for start in range(0, len(sel), 16):
+        chunk = sel[start:start + 16]
+        rgbs = video.read(chunk)
+        ap = to_apng[chunk]
+        tags = seg.read(ap[ap >= 0]) if (ap >= 0).any() else None
+        t = 0
+        for k, f in enumerate(chunk):
+            if ap[k] >= 0:
+                tag, t = tags[t], t + 1
+            else:
+                tag = blank
+            yield panel(rgbs[k], tag, int(f))

@@ -144,6 +144,32 @@ def load_table(table) -> dict:
     """A table by name (one of :func:`table_names`) or a path to its YAML file, checked."""
     import yaml
 
+    path = _table_path(table)
+    doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    for key in ("table", "task", "metrics", "common", "budgets", "rows", "findings"):
+        if not isinstance(doc, dict) or key not in doc:
+            raise ValueError(f"{path}: missing key {key!r}")
+    try:
+        task = get_task(doc["task"])
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    doc["metrics"] = metric_specs(task, doc["metrics"], path)
+    # what the renderers (bsp_fast.reporting) need of the task: its setting columns
+    # (sigma and MJP, where inputs can be deformed) and its trivial baseline's name
+    doc["deformed_inputs"], doc["trivial"] = task.deformed_inputs, task.baseline
+    _check_rows(doc, path)
+    _check_findings(doc, path, task)
+    check_exploratory(doc, path)
+    doc["deviations"] = check_deviations(doc, path)
+    doc["path"] = str(path)
+    check_budget_rule(doc)
+    check_figures(doc)
+    return doc
+
+
+def _table_path(table) -> Path:
+    """The YAML file of a table name (the first of :func:`experiments_dirs` that has it)
+    or of a path."""
     path = Path(table)
     if path.suffix not in (".yaml", ".yml"):
         if str(table) not in table_names():
@@ -157,18 +183,11 @@ def load_table(table) -> dict:
                              + " (a broken install? a path to a table YAML reads your own)")
     if not path.is_file():
         raise ValueError(f"{path}: no such table file")
-    doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-    for key in ("table", "task", "metrics", "common", "budgets", "rows", "findings"):
-        if not isinstance(doc, dict) or key not in doc:
-            raise ValueError(f"{path}: missing key {key!r}")
-    try:
-        task = get_task(doc["task"])
-    except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
-    doc["metrics"] = metric_specs(task, doc["metrics"], path)
-    # what the renderers (bsp_fast.reporting) need of the task: its setting columns
-    # (sigma and MJP, where inputs can be deformed) and its trivial baseline's name
-    doc["deformed_inputs"], doc["trivial"] = task.deformed_inputs, task.baseline
+    return path
+
+
+def _check_rows(doc: dict, path: Path) -> None:
+    """Each row's budgets, name, data_suffix, crop_box and max_seeds."""
     names = [r["name"] for r in doc["rows"]]
     for r in doc["rows"]:
         extra = r.get("budgets") or {}
@@ -198,6 +217,11 @@ def load_table(table) -> dict:
             raise ValueError(f"{path}: row {r['name']!r}: max_seeds needs a max_seeds_why "
                              "(its measured cost per seed); its findings are then "
                              "inconclusive by the 5-seed rule")
+
+
+def _check_findings(doc: dict, path: Path, task) -> None:
+    """Each finding's kind, relation, rows, baseline and metric."""
+    names = [r["name"] for r in doc["rows"]]
     for f in doc["findings"]:
         if f.get("kind") not in KINDS:
             raise ValueError(f"{path}: finding kind {f.get('kind')!r}; allowed: {', '.join(KINDS)}")
@@ -212,12 +236,6 @@ def load_table(table) -> dict:
         if f.get("metric") not in doc["metrics"]:
             raise ValueError(f"{path}: finding {f.get('text')!r}: metric {f.get('metric')!r} "
                              f"is not one of {list(doc['metrics'])}")
-    check_exploratory(doc, path)
-    doc["deviations"] = check_deviations(doc, path)
-    doc["path"] = str(path)
-    check_budget_rule(doc)
-    check_figures(doc)
-    return doc
 
 
 def _registry(task) -> dict:

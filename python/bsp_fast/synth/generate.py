@@ -146,8 +146,6 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
     annotated_frames, crossing_clips}}, seconds, clips_per_second, ids, seed, preset,
     poses_only.
     """
-    from .._version import __version__
-
     t0 = time.perf_counter()
     out_dir = os.path.abspath(os.fspath(out_dir))
     if os.path.exists(out_dir) and not force:
@@ -156,14 +154,27 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
         raise ValueError(f"poses_only: expected True or False, got {poses_only!r}")
     cfg = _resolve(preset, clips, frames, size, fov, seed, config, motion,
                    apng_drop_duplicates, poses_only, bone_length_variation)
-    n = cfg.number_of_clips
+    workers = _worker_count(workers, cfg.number_of_clips)
+    stats = _write_dataset(cfg, out_dir, workers, progress, client, force)
+    return _summary(cfg, stats, time.perf_counter() - t0, out_dir)
+
+
+def _worker_count(workers, clips: int) -> int:
+    """The worker processes: ``workers`` (default: the CPU count), at most one per clip."""
     if workers is None:
-        workers = min(os.cpu_count() or 1, n)
+        workers = min(os.cpu_count() or 1, clips)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers: expected a positive integer, got {workers!r}")
-    workers = min(workers, n)
-    parent = os.path.dirname(out_dir)
-    os.makedirs(parent, exist_ok=True)
+    return min(workers, clips)
+
+
+def _write_dataset(cfg: SynthConfig, out_dir: str, workers: int, progress: bool, client,
+                   force: bool) -> list:
+    """Writes the clips, data.csv and config.yaml under a temporary name renamed to
+    ``out_dir`` when complete; returns the clips' stats."""
+    from .._version import __version__
+
+    os.makedirs(os.path.dirname(out_dir), exist_ok=True)
     with atomic_output(out_dir, force=force, folder=True) as tmp_path:
         tmp = str(tmp_path)
         if not cfg.poses_only:
@@ -172,7 +183,7 @@ def generate(out_dir, preset: str = "sample", *, clips: int | None = None,
         stats = _run_clips(cfg, tmp, workers, progress, client)
         _write_config(cfg, tmp, __version__)
         shutil.rmtree(os.path.join(tmp, PARTS))
-    return _summary(cfg, stats, time.perf_counter() - t0, out_dir)
+    return stats
 
 
 def _write_config(cfg: SynthConfig, root: str, version: str) -> None:

@@ -285,61 +285,13 @@ def _classification(parts, rows, profiles, per_frame, bins) -> dict:
 
 def _frame_tables(spec, parts, profiles, per_frame, bins, notes) -> dict:
     N = sum(len(p["row"]) for p in parts)
-    # per-clip values of the clip file cut to each clip's scored frames
-    pos, height, distance = 0, [], []
-    for p in parts:
-        a, b = p["frames"]
-        n = len(p["row"])
-        height.append(per_frame["height"][pos:pos + n, a:b].reshape(-1))
-        if "distance" in per_frame:
-            distance.append(per_frame["distance"][pos:pos + n, a:b].reshape(-1))
-        pos += n
-    height = np.concatenate(height)
+    height, distance = _scored_frames(parts, per_frame)
     profile = _clip_to_frames(parts, profiles)
     F = len(height)
-    if spec.breakdown_scores == "joint_error_mm":
-        err = _frames(parts, "err")  # (F, 26) mm
-
-        def stats(mask):
-            return _lifting_stats(err[mask])
-
-        cols = headers("joints", "mpjpe_mm")
-        joint_rows = [{"bin": name, "count": F, "mpjpe_mm": float(err[:, j].mean())
-                       if F else math.nan} for j, name in enumerate(JOINT_NAMES)]
-        joint_cols = headers("mpjpe_mm")
-        total_joints = F * NUM_JOINTS
-        summary = _lifting_stats(err)
-    else:
-        pred, gt, present = _frames(parts, "pred"), _frames(parts, "gt"), \
-            _frames(parts, "present")
-
-        def stats(mask):
-            return _pck_stats(pred[mask], gt[mask], present[mask])
-
-        cols = headers("joints", "pck_0.05", "pck_auc")
-        joint_rows = []
-        for j, name in enumerate(JOINT_NAMES):
-            sel = np.zeros(present.shape, bool)
-            sel[:, j] = True
-            c = M.pck_counts(pred, gt, alpha=PCK_ALPHA, norm="bbox", visible=present,
-                             select=sel)
-            joint_rows.append({"bin": name, "count": c.total, "pck_0.05": c.value})
-        joint_cols = headers("pck_0.05")
-        summary = _pck_stats(pred, gt, present)
-        total_joints = summary["joints"]
-    # (bins key, edges, unit, what a frame's value is, title, first column, values)
-    by_distance = spec.breakdown_bins == "camera_distance"
-    key, edges, unit, per, title, column, values = (
-        ("distance_m", DISTANCE_EDGES_M, "m", "hips' depth along the camera's forward axis",
-         "per camera distance", "distance", np.concatenate(distance)) if by_distance else
-        ("height_px", HEIGHT_EDGES_PX, "px", "vertical extent of its ground-truth 2D joints",
-         "per pedestrian pixel height", "height", height))
-    labels = edges_labels(edges, unit)
-    bins[key] = {"rows": labels, "per": f"frame ({per})"}
-    size_table = _table(title, column, "frames", cols,
-                        _grouped(labels, bin_index(values, edges), stats), F)
+    stats, cols, joint_rows, joint_cols, total_joints, summary = _joint_scores(
+        parts, spec.breakdown_scores, F)
     tables = [_table("per joint", "joint", "joints", joint_cols, joint_rows, total_joints),
-              size_table]
+              _size_table(spec, height, distance, bins, cols, stats)]
     prof, prof_idx = np.unique(profile.astype(str), return_inverse=True)
     tables.append(_table("per age/gender profile", "profile", "frames", cols,
                          _grouped(prof, prof_idx, stats), F))
@@ -357,3 +309,63 @@ def _frame_tables(spec, parts, profiles, per_frame, bins, notes) -> dict:
     return {"totals": {"clips": N, "frames": F, "joints": int(total_joints)},
             "summary": summary, "tables": tables, "summary_columns": summary_cols,
             "summary_count": "frames"}
+
+
+def _scored_frames(parts, per_frame) -> tuple:
+    """Each frame's pixel height (one array) and camera distance (a list of the clips'
+    arrays; empty where the clip file has none), cut to each clip's scored frames."""
+    pos, height, distance = 0, [], []
+    for p in parts:
+        a, b = p["frames"]
+        n = len(p["row"])
+        height.append(per_frame["height"][pos:pos + n, a:b].reshape(-1))
+        if "distance" in per_frame:
+            distance.append(per_frame["distance"][pos:pos + n, a:b].reshape(-1))
+        pos += n
+    return np.concatenate(height), distance
+
+
+def _joint_scores(parts, scores: str, F: int) -> tuple:
+    """What the frame tables need of the scores, joint errors (``joint_error_mm``) or PCK:
+    the statistics of a frame mask, their columns, the per-joint rows and their columns,
+    the joint count and the summary."""
+    if scores == "joint_error_mm":
+        err = _frames(parts, "err")  # (F, 26) mm
+
+        def stats(mask):
+            return _lifting_stats(err[mask])
+
+        joint_rows = [{"bin": name, "count": F, "mpjpe_mm": float(err[:, j].mean())
+                       if F else math.nan} for j, name in enumerate(JOINT_NAMES)]
+        return (stats, headers("joints", "mpjpe_mm"), joint_rows, headers("mpjpe_mm"),
+                F * NUM_JOINTS, _lifting_stats(err))
+    pred, gt, present = _frames(parts, "pred"), _frames(parts, "gt"), _frames(parts, "present")
+
+    def stats(mask):
+        return _pck_stats(pred[mask], gt[mask], present[mask])
+
+    joint_rows = []
+    for j, name in enumerate(JOINT_NAMES):
+        sel = np.zeros(present.shape, bool)
+        sel[:, j] = True
+        c = M.pck_counts(pred, gt, alpha=PCK_ALPHA, norm="bbox", visible=present, select=sel)
+        joint_rows.append({"bin": name, "count": c.total, "pck_0.05": c.value})
+    summary = _pck_stats(pred, gt, present)
+    return (stats, headers("joints", "pck_0.05", "pck_auc"), joint_rows, headers("pck_0.05"),
+            summary["joints"], summary)
+
+
+def _size_table(spec, height, distance: list, bins: dict, cols: dict, stats) -> dict:
+    """The table per camera distance or per pixel height (the spec's ``breakdown_bins``);
+    its bins recorded in ``bins``."""
+    # (bins key, edges, unit, what a frame's value is, title, first column, values)
+    by_distance = spec.breakdown_bins == "camera_distance"
+    key, edges, unit, per, title, column, values = (
+        ("distance_m", DISTANCE_EDGES_M, "m", "hips' depth along the camera's forward axis",
+         "per camera distance", "distance", np.concatenate(distance)) if by_distance else
+        ("height_px", HEIGHT_EDGES_PX, "px", "vertical extent of its ground-truth 2D joints",
+         "per pedestrian pixel height", "height", height))
+    labels = edges_labels(edges, unit)
+    bins[key] = {"rows": labels, "per": f"frame ({per})"}
+    return _table(title, column, "frames", cols,
+                  _grouped(labels, bin_index(values, edges), stats), len(height))

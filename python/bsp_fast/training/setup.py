@@ -119,18 +119,10 @@ def _extra_logger(kind: str, tmp: Path, name: str):
     return WandbLogger(save_dir=str(tmp), name=name, project="bsp_fast", offline=True)
 
 
-def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = True,
-                 callbacks=(), max_epochs: int | None = None):
-    """The Lightning Trainer of a run (``tmp``: run directory being written) or, with
-    ``fit=False``, an evaluation-only one (no logger, no checkpoints). ``callbacks``: more
-    callbacks; ``max_epochs``: instead of the config's (a run whose training had ended)."""
-    import warnings
-
-    import lightning.pytorch as pl
-
-    from .checkpointing import RunCheckpoint
-
+def _quiet_lightning() -> None:
+    """Silences Lightning's warnings that do not apply to these runs, and its banners."""
     import logging
+    import warnings
 
     warnings.filterwarnings("ignore", message=r".*does not have many workers.*")
     warnings.filterwarnings("ignore", message=r".*number of training batches.*")
@@ -146,6 +138,40 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
     warnings.filterwarnings("ignore", message=r".*could not find the monitored key.*")
     for name in ("lightning.pytorch", "lightning.fabric"):  # device banners and tips
         logging.getLogger(name).setLevel(logging.WARNING)
+
+
+def _fit_loggers(cfg: dict, tmp: Path) -> list:
+    """The CSV log under ``tmp``, and the config's extra logger if any."""
+    from lightning.pytorch.loggers import CSVLogger
+
+    loggers = [CSVLogger(save_dir=str(tmp), name="logs")]
+    extra = _extra_logger(cfg["logger"], tmp, Path(cfg["out"]).name)
+    return loggers + ([extra] if extra is not None else [])
+
+
+def _fit_callbacks(cfg: dict, tmp: Path) -> list:
+    """The best checkpoint by validation loss, and early stopping if the config asks."""
+    from .checkpointing import RunCheckpoint
+
+    callbacks = [RunCheckpoint(dirpath=str(tmp / "checkpoints"), filename="best",
+                               monitor="val/loss", mode="min", save_top_k=1,
+                               save_last=False, enable_version_counter=False)]
+    if cfg["early_stop"]:
+        from lightning.pytorch.callbacks import EarlyStopping
+
+        callbacks.append(EarlyStopping(monitor="val/loss", mode="min",
+                                       patience=cfg["early_stop"]))
+    return callbacks
+
+
+def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = True,
+                 callbacks=(), max_epochs: int | None = None):
+    """The Lightning Trainer of a run (``tmp``: run directory being written) or, with
+    ``fit=False``, an evaluation-only one (no logger, no checkpoints). ``callbacks``: more
+    callbacks; ``max_epochs``: instead of the config's (a run whose training had ended)."""
+    import lightning.pytorch as pl
+
+    _quiet_lightning()  # before the imports below, which warn too
     from lightning.pytorch.callbacks.progress.progress_bar import ProgressBar
 
     from .progress import progress_callbacks
@@ -163,19 +189,8 @@ def make_trainer(cfg: dict, tmp: Path | None, precision: str, *, fit: bool = Tru
         if not fit:
             return pl.Trainer(devices=1, logger=False, enable_checkpointing=False,
                               callbacks=list(callbacks), **common)
-        from lightning.pytorch.loggers import CSVLogger
-
-        loggers = [CSVLogger(save_dir=str(tmp), name="logs")]
-        extra = _extra_logger(cfg["logger"], tmp, Path(cfg["out"]).name)
-        loggers += [extra] if extra is not None else []
-        callbacks += [RunCheckpoint(dirpath=str(tmp / "checkpoints"), filename="best",
-                                   monitor="val/loss", mode="min", save_top_k=1,
-                                   save_last=False, enable_version_counter=False)]
-        if cfg["early_stop"]:
-            from lightning.pytorch.callbacks import EarlyStopping
-
-            callbacks.append(EarlyStopping(monitor="val/loss", mode="min",
-                                           patience=cfg["early_stop"]))
+        loggers = _fit_loggers(cfg, tmp)
+        callbacks += _fit_callbacks(cfg, tmp)
         from .lifecycle import AtomicCheckpointIO
 
         # a mix's batch sampler is not distributed: one process (config refuses more)
