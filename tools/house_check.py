@@ -31,10 +31,6 @@ LONG_FUNCTIONS = {
     # one public function whose keyword arguments are documented where they are checked
     "conversion/api.py:convert": "the public API's reference is its docstring (46 lines); "
                                  "the code is 44",
-    "interop/exporters.py:export_coco": "one COCO document built top to bottom",
-    "interop/exporters.py:export_videopose3d": "one loop over the runs, then the two "
-                                               "archives; its per-run steps are helpers",
-    "interop/readers.py:read_coco": "the COCO format's cases, one after another",
 }
 ROOT = Path(__file__).resolve().parent.parent
 PKG = ROOT / "python" / "bsp_fast"

@@ -300,11 +300,7 @@ def export_videopose3d(h5_path, out_2d, out_3d=None, *, joints="coco17", split: 
     expects: every subject starts at its video's frame 0 (:func:`_viewer_run`) and the 3D
     is in the ground frame. Module docstring: subjects, filling, no NaN. Returns counts,
     the subjects per split and the runs left out."""
-    if viewer and frame_3d not in (None, "ground"):
-        raise ValueError(f"the viewer export writes its 3D in the ground frame (z up), not "
-                         f"{frame_3d!r}: leave out {option('frame_3d', '--frame')} or give "
-                         "ground")
-    frame_3d = frame_3d or ("ground" if viewer else "camera")
+    frame_3d = _frame_3d(frame_3d, viewer)
     dst = joint_set(joints)
     m = skeleton_map(CARLA, dst, derive)
     rules = _fill_rules(dst, m)
@@ -331,9 +327,7 @@ def export_videopose3d(h5_path, out_2d, out_3d=None, *, joints="coco17", split: 
         pos2d[name] = {"custom": [uv.astype(np.float32)]}
         video_meta[name] = {"w": int(r["w"]), "h": int(r["h"])}
         subjects[r["split"]].append(name)
-        source[name] = {"split": r["split"], "video": r["video"], "track": r["track"],
-                        "start_frame": int(r["frames"][0]), "end_frame": int(r["frames"][-1]) + 1,
-                        "padded_frames": pad}
+        source[name] = _source(r, pad)
         if xyz is not None:
             pos3d[name] = {"custom": xyz.astype(np.float32)}
     if not pos2d:
@@ -347,16 +341,38 @@ def export_videopose3d(h5_path, out_2d, out_3d=None, *, joints="coco17", split: 
                 "interpolated_joints": filled}
     targets = [(out_2d, dict(positions_2d=pos2d, metadata=metadata), _save_npz)]
     if out_3d is not None:
-        meta3 = {"layout_name": "h36m", "num_joints": len(h36m), "cameras": cameras,
-                 "joint_names": list(h36m.joints), "units": "metres", "frame": frame_3d,
-                 "filled_joints": _fill_text(h36m, rules3)}
-        targets.append((out_3d, dict(positions_3d=pos3d, metadata=meta3), _save_npz))
+        targets.append((out_3d, _archive_3d(pos3d, cameras, frame_3d, h36m, rules3), _save_npz))
     _save_all(targets, force)
     return {"subjects": {s: len(v) for s, v in subjects.items()}, "joints": dst.name,
             "layout_name": metadata["layout_name"], "subject_names": subjects,
             "num_joints": len(dst),
             "dropped": dropped, "interpolated": filled, "filled_joints": fills,
             "present": [n for n, p in zip(dst.joints, m.present) if p]}
+
+
+def _frame_3d(frame_3d: str | None, viewer: bool) -> str:
+    """The 3D frame asked for, or the default: ``ground`` for the viewer, else ``camera``
+    (the viewer's 3D is always in the ground frame)."""
+    if viewer and frame_3d not in (None, "ground"):
+        raise ValueError(f"the viewer export writes its 3D in the ground frame (z up), not "
+                         f"{frame_3d!r}: leave out {option('frame_3d', '--frame')} or give "
+                         "ground")
+    return frame_3d or ("ground" if viewer else "camera")
+
+
+def _source(r: dict, pad: int) -> dict:
+    """Where a subject comes from: split, video, track and its frames (end exclusive)."""
+    return {"split": r["split"], "video": r["video"], "track": r["track"],
+            "start_frame": int(r["frames"][0]), "end_frame": int(r["frames"][-1]) + 1,
+            "padded_frames": pad}
+
+
+def _archive_3d(pos3d: dict, cameras: dict, frame_3d: str, h36m, rules3: dict) -> dict:
+    """The 3D archive's arrays: H36M-17 positions in metres and their metadata."""
+    meta3 = {"layout_name": "h36m", "num_joints": len(h36m), "cameras": cameras,
+             "joint_names": list(h36m.joints), "units": "metres", "frame": frame_3d,
+             "filled_joints": _fill_text(h36m, rules3)}
+    return dict(positions_3d=pos3d, metadata=meta3)
 
 
 def _save_npz(path, arrays: dict) -> None:
@@ -440,13 +456,39 @@ def export_coco(h5_path, out, *, kind: str = "annotations", images_out=None,
     uv, ok = m.apply(np.stack([r[0] for r in rows]).astype(np.float64),
                      np.stack([r[1] for r in rows]), fill=0.0)
     track_ids = _track_ids(keys)
-    named = any(str(v) != t for (_, t), v in track_ids.items())
     masks = _Masks(h5_path) if kind == "annotations" and any(r[4] for r in rows) else None
+    images, records = _coco_entries(keys, rows, uv, ok, kind, track_ids, masks,
+                                    _one_split(data))
+    images_doc = _images_doc(h5_path, images, dst)
+    if kind == "annotations":
+        targets = [(out, dict(images_doc, annotations=records), _save_json)]
+    else:
+        targets = [(out, records, _save_json), (images_out, images_doc, _save_json)]
+    if masks is not None:
+        masks.close()
+    if images_dir is not None:
+        targets.append((images_dir, (h5_path, images, keys, rows), _save_images, True))
+    _save_all(targets, force)
+    return {"images": len(images), "records": len(records), "joints": dst.name,
+            "present": [n for n, p in zip(dst.joints, m.present) if p],
+            "images_written": len(images) if images_dir is not None else 0}
+
+
+def _one_split(data: dict) -> bool:
+    """Whether every video lies in one split (then each image records it)."""
     in_splits: dict = {}
     for s, c in data.items():
         for v in c["video"]:
             in_splits.setdefault(v, set()).add(s)
-    one_split = all(len(v) == 1 for v in in_splits.values())
+    return all(len(v) == 1 for v in in_splits.values())
+
+
+def _coco_entries(keys, rows, uv, ok, kind: str, track_ids: dict, masks,
+                  one_split: bool) -> tuple:
+    """The COCO ``images`` (one per video frame) and the records (one per track and
+    frame: keypoints, track, label; box, area and mask for ``annotations``, a score for
+    ``results``)."""
+    named = any(str(v) != t for (_, t), v in track_ids.items())
     image_ids: dict = {}
     images, records = [], []
     for n, ((video, track, frame), row) in enumerate(zip(keys, rows)):
@@ -474,33 +516,27 @@ def export_coco(h5_path, out, *, kind: str = "annotations", images_out=None,
         else:
             rec["score"] = 1.0
         records.append(rec)
-    skeleton = (COCO_SKELETON if dst.name == "coco17" else
-                [[j + 1, p + 1] for j, p in enumerate(dst.parents or ()) if p >= 0])
-    category = {"id": 1, "name": "person", "supercategory": "person",
-                "keypoints": list(dst.joints), "skeleton": skeleton}
+    return images, records
+
+
+def _images_doc(h5_path, images: list, dst) -> dict:
+    """The COCO document around ``images``: info, license and the person category with
+    the ``dst`` joint set's keypoints and skeleton."""
     import datetime
 
     from .._version import __version__
 
+    skeleton = (COCO_SKELETON if dst.name == "coco17" else
+                [[j + 1, p + 1] for j, p in enumerate(dst.parents or ()) if p >= 0])
+    category = {"id": 1, "name": "person", "supercategory": "person",
+                "keypoints": list(dst.joints), "skeleton": skeleton}
     today = datetime.date.today()
-    images_doc = {"info": {"description": f"bsp-interop export coco of {h5_path}",
-                           "version": "1.0", "year": today.year, "url": "",
-                           "contributor": f"bsp_fast {__version__}",
-                           "date_created": today.isoformat()},
-                  "licenses": [{"id": 1, "name": "the source dataset's license", "url": ""}],
-                  "images": images, "categories": [category]}
-    if kind == "annotations":
-        targets = [(out, dict(images_doc, annotations=records), _save_json)]
-    else:
-        targets = [(out, records, _save_json), (images_out, images_doc, _save_json)]
-    if masks is not None:
-        masks.close()
-    if images_dir is not None:
-        targets.append((images_dir, (h5_path, images, keys, rows), _save_images, True))
-    _save_all(targets, force)
-    return {"images": len(images), "records": len(records), "joints": dst.name,
-            "present": [n for n, p in zip(dst.joints, m.present) if p],
-            "images_written": len(images) if images_dir is not None else 0}
+    return {"info": {"description": f"bsp-interop export coco of {h5_path}",
+                     "version": "1.0", "year": today.year, "url": "",
+                     "contributor": f"bsp_fast {__version__}",
+                     "date_created": today.isoformat()},
+            "licenses": [{"id": 1, "name": "the source dataset's license", "url": ""}],
+            "images": images, "categories": [category]}
 
 
 class _Masks:

@@ -181,7 +181,32 @@ def read_coco(path, images=None, image_size=None, tracks: str = "require",
     if tracks not in ("require", "best"):
         raise ValueError(f"tracks must be 'require' or 'best', got {tracks!r}")
     path = Path(path)
-    size = _image_size(image_size)
+    records, annotations, table = _coco_records(path, images, _image_size(image_size))
+    jset = joint_set(joints)
+    table_size = {(v, f): (w, h) for v, f, w, h, _ in table.values()}
+    rows, crossing = [], {}
+    for k, rec in enumerate(records):
+        rows.append(_coco_row(rec, f"{path}: record {k}", table, jset, annotations))
+        crossing[rows[-1][5]] = rec.get("crossing")
+    frames = {}
+    for video, frame, *_ in table.values():
+        frames.setdefault(video, set()).add(frame)
+    rows = [((*table[r[0]][:2],),) + r[1:] for r in rows]
+    rows, notes = _assign_untracked(rows, tracks, frames, _COCO_WORDS)
+    out = [(*r[0], r[1], r[2], r[3], *table_size[r[0]], r[5]) for r in rows]
+    det = _detections(jset.name, out, str(path), notes)
+    if crossing and all(v in (0, 1) for v in crossing.values()):
+        det.labels = {(v, t, int(f)): crossing[w]
+                      for v, t, f, w in zip(det.video, det.track, det.frame, det.where)}
+    det.splits, note = _source_splits(table)
+    if note:
+        det.notes["split_note"] = note
+    return det
+
+
+def _coco_records(path: Path, images, size) -> tuple:
+    """The records of a COCO results list or annotations dict, whether they are
+    annotations, and the image table (from ``images``, else the annotations file's own)."""
     doc = load_json(path)
     if isinstance(doc, dict) and "annotations" in doc:
         records, annotations = doc["annotations"], True
@@ -199,45 +224,31 @@ def read_coco(path, images=None, image_size=None, tracks: str = "require",
                        f"with 'annotations', got a JSON {type(doc).__name__}")
     if not isinstance(records, list):
         raise BadInput(f"{path}: 'annotations' must be a list")
-    jset = joint_set(joints)
+    return records, annotations, table
+
+
+def _coco_row(rec, where: str, table: dict, jset, annotations: bool) -> tuple:
+    """One COCO record checked: (image id, track or None, (J, 2) points, confidences,
+    score, where it is)."""
     J = len(jset)
-    table_size = {(v, f): (w, h) for v, f, w, h, _ in table.values()}
-    rows, crossing = [], {}
-    for k, rec in enumerate(records):
-        where = f"{path}: record {k}"
-        try:
-            if not isinstance(rec, dict):
-                raise ValueError("not a JSON object")
-            for key in ("image_id", "keypoints"):
-                if key not in rec:
-                    raise ValueError(f"no {key!r}")
-            if rec.get("category_id", 1) != 1:
-                raise ValueError(f"category_id {rec['category_id']!r} is not 1 (person)")
-            kp = _numbers(rec["keypoints"], 3 * J, f"keypoints ({jset.name})").reshape(J, 3)
-            if rec["image_id"] not in table:
-                raise ValueError(f"image_id {rec['image_id']!r} is not in the images list")
-            score = float(rec.get("score", 1.0)) if not annotations else 1.0
-        except (ValueError, TypeError) as exc:
-            raise BadInput(f"{where}: {exc}") from None
-        conf = (kp[:, 2] > 0).astype(np.float64) if annotations else kp[:, 2]
-        track = rec.get("track_name", rec.get("track_id"))  # our exporter: both
-        rows.append((rec["image_id"], None if track is None else str(track), kp[:, :2], conf,
-                     score, f"{where} (image_id {rec['image_id']!r})"))
-        crossing[rows[-1][5]] = rec.get("crossing")
-    frames = {}
-    for video, frame, *_ in table.values():
-        frames.setdefault(video, set()).add(frame)
-    rows = [((*table[r[0]][:2],),) + r[1:] for r in rows]
-    rows, notes = _assign_untracked(rows, tracks, frames, _COCO_WORDS)
-    out = [(*r[0], r[1], r[2], r[3], *table_size[r[0]], r[5]) for r in rows]
-    det = _detections(jset.name, out, str(path), notes)
-    if crossing and all(v in (0, 1) for v in crossing.values()):
-        det.labels = {(v, t, int(f)): crossing[w]
-                      for v, t, f, w in zip(det.video, det.track, det.frame, det.where)}
-    det.splits, note = _source_splits(table)
-    if note:
-        det.notes["split_note"] = note
-    return det
+    try:
+        if not isinstance(rec, dict):
+            raise ValueError("not a JSON object")
+        for key in ("image_id", "keypoints"):
+            if key not in rec:
+                raise ValueError(f"no {key!r}")
+        if rec.get("category_id", 1) != 1:
+            raise ValueError(f"category_id {rec['category_id']!r} is not 1 (person)")
+        kp = _numbers(rec["keypoints"], 3 * J, f"keypoints ({jset.name})").reshape(J, 3)
+        if rec["image_id"] not in table:
+            raise ValueError(f"image_id {rec['image_id']!r} is not in the images list")
+        score = float(rec.get("score", 1.0)) if not annotations else 1.0
+    except (ValueError, TypeError) as exc:
+        raise BadInput(f"{where}: {exc}") from None
+    conf = (kp[:, 2] > 0).astype(np.float64) if annotations else kp[:, 2]
+    track = rec.get("track_name", rec.get("track_id"))  # our exporter: both
+    return (rec["image_id"], None if track is None else str(track), kp[:, :2], conf,
+            score, f"{where} (image_id {rec['image_id']!r})")
 
 
 _COCO_WORDS = dict(
