@@ -158,7 +158,7 @@ def _config(tmp_path, mix, **extra):
                                                     "data": True}]},
      {}, 2, ["mix source(s) ['amass'] have no clip file: give --mix-data amass=FILE"]),
     ({"sources": [{"name": "jaad", "share": 1.0}]},
-     {"mix_data": {"jaad": "missing.h5"}}, 2, ["mix source 'jaad':", "missing.h5: no such "
+     {"mix_data": {"jaad": "missing.h5"}}, 1, ["mix source 'jaad':", "missing.h5: no such "
                                                "clip file"]),
     (MIX, {"test_on": "pie2"}, 2, ["test_on 'pie2' has no clip file: give --mix-data "
                                    "pie2=FILE", "jaad, carla_bsp"]),

@@ -224,8 +224,9 @@ def plan_mix(mix: dict, files: dict, data=None, test_on: str | None = None) -> d
                     h5_path=own["h5_path"] if own else files[test_on])
     for s in sources + ([test] if test else []):
         if s["h5_path"] is not None and not Path(s["h5_path"]).is_file():
-            raise ValueError(f"mix source {s['name']!r}: {s['h5_path']}: no such clip file "
-                             f"({_MAKE})")
+            # a missing input, not a bad option: exit 1 on the command line, as --data's
+            raise FileNotFoundError(f"mix source {s['name']!r}: {s['h5_path']}: no such clip "
+                                    f"file ({_MAKE})")
     return {"sources": sources, "test": test}
 
 
