@@ -98,6 +98,30 @@ def test_every_command_a_missing_input_is_1_and_a_bad_option_2(tmp_path, command
     assert (got, heavy) == (2, []) and f"(see {command} --help)" in line, err
 
 
+# an existing output, each command's own (bsp-eval, bsp-predict and bsp-reproduce write
+# theirs only after a run is found: their FileExistsError is the ladder's case below)
+EXISTING_OUTPUT = {"bsp-synth": ["out"], "bsp-convert": ["ds", "o.h5", "--no-media"],
+                   "bsp-train": ["lifting", "lstm", "--data", "c.h5", "--out", "out"],
+                   "bsp-preview": ["clips", "c.h5", "--out", "o.png"],
+                   "bsp-check": ["ds", "--fix", "out"],
+                   "bsp-interop": ["export", "coco", "c.h5", "o.json"]}
+
+
+def test_an_existing_output_is_3_for_every_command_that_names_one(tmp_path):
+    from bsp_testdata import recording, write_dataset
+    from bsp_fast.data.testing import write_clip_file
+
+    write_clip_file(tmp_path / "c.h5", clips=(4, 2, 2), clip_length=4, seed=1)
+    write_dataset(tmp_path / "ds", recording("r0", range(20), crossing_from=10))
+    (tmp_path / "out").mkdir()
+    for name in ("o.h5", "o.png", "o.json"):
+        (tmp_path / name).write_bytes(b"")
+    for command, argv in EXISTING_OUTPUT.items():
+        got, heavy, err = _probe(COMMANDS[command], argv, cwd=tmp_path)
+        line = _one_line_error(err)
+        assert (got, heavy) == (3, []) and "exists" in line, (command, err)
+
+
 def test_every_command_goes_through_the_one_ladder():
     """Each command's main() hands its work to command_line.run_command."""
     import ast
