@@ -31,7 +31,11 @@ ERRORS = [["bsp-train", "lifitng", "lstm"],
           ["bsp-predict", "/nope", "--out", "p.h5"],
           ["bsp-reproduce", "clasification", "--data", "s.h5"],
           ["bsp-convert", "/nope", "o.h5"],
-          ["bsp-interop", "export", "coco", "/nope.h5", "o.json"]]
+          ["bsp-interop", "export", "coco", "/nope.h5", "o.json"],
+          ["bsp-synth", "out", "--config", "/nope.yaml"],
+          ["bsp-preview", "clips", "/nope.h5", "--out", "x.png"],
+          ["bsp-check", "/nope"],
+          ["bsp-cache", "where", "/nope"]]
 SCORING = [["bsp-eval", "lifting", "--quiet"], ["bsp-eval", "classification", "--quiet"],
            ["bsp-predict", "lifting", "--out", "p.h5", "--force", "--quiet"],
            ["bsp-predict", "classification", "--out", "c.h5", "--force", "--quiet"]]
