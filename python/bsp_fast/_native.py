@@ -7,6 +7,10 @@ folder ``bsp_fast/`` of each ``sys.path`` entry, in order: a development build t
 installed package's copy when the source tree's ``python/`` comes first on the path. Only
 the C++ module is looked up that way: every Python module comes from this package's own
 folder, so a module deleted from the source tree is not found in an older install.
+
+The module is registered as ``bsp_fast._core`` in ``sys.modules``; the package root loads
+it first, so ``import bsp_fast._core`` by name (unpickling a core object in a worker
+process) finds it.
 """
 from __future__ import annotations
 

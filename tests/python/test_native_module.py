@@ -37,3 +37,15 @@ def test_another_bsp_fast_folder_on_the_path_lends_the_core_only(tmp_path):
                        env=env, cwd=tmp_path, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.split() == ["not", "found", "True"]
+
+
+def test_the_core_imports_by_name_in_a_fresh_process(tmp_path):
+    """``import bsp_fast._core`` (what unpickling a core object in a worker process does)
+    finds the module _native loaded, wherever the core lies on the path."""
+    code = ("import sys, bsp_fast._core as c\n"
+            "print(c is sys.modules['bsp_fast._core'] and hasattr(c, 'plan_clips'))\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(PYTHON), os.environ.get("PYTHONPATH", "")]))
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env=env, cwd=tmp_path, timeout=120)
+    assert r.returncode == 0 and r.stdout.split() == ["True"], r.stderr[-2000:]
