@@ -193,12 +193,17 @@ def grid() -> list:
 
 
 def verdict(r: dict) -> str:
+    """``in target``, ``under`` or ``over``; a collapse cell's names the rule that marks
+    the tables where a collapse is seen (the others cannot show a mode no seed showed)."""
     if r["used"] == 0:
         return "all inconclusive by rule"
     lo, hi = TARGET
     if lo <= r["coverage"] <= hi:
         return "in target"
-    return "under" if r["coverage"] < lo else "over"
+    out = "under" if r["coverage"] < lo else "over"
+    if r["variant"] == "collapse":
+        out += " (rule: seeds in two modes, where a collapse is seen)"
+    return out
 
 
 def markdown(rows: list) -> str:
@@ -242,7 +247,8 @@ def main(argv=None) -> int:
         rows.append(run_cell(cell, args.sims, args.seed))
         doc = {"command": "python3 experiments/coverage_study.py " + " ".join(
             a if not Path(a).is_absolute() else Path(a).name for a in (argv or sys.argv[1:])),
-            "method": "variance_components (bsp_fast.metrics.hierarchical)",
+            "method": "variance_components (bsp_fast.metrics.hierarchical): Satterthwaite "
+                      "df bounded by a dominant mean square's (bounded_df)",
             "target": list(TARGET), "rows": rows,
             "seconds": round(time.perf_counter() - t0, 1)}
         write_text(path, json.dumps(doc, indent=1) + "\n")

@@ -308,7 +308,8 @@ def _independent(rows, fn, log=False):
     the statistic's terms ``W`` the rows' terms times fn's coefficients (fn is linear; the
     rows share their seed numbers, so they are paired on seeds), the two-way ANOVA mean
     squares of ``W`` (seeds x recordings), ``V = (MS_seed + MS_rec - MS_int) / (S R)``
-    (the seed part left out when MS_seed < MS_int), Satterthwaite's df; ``log``: the t
+    (the seed part left out when MS_seed < MS_int), Satterthwaite's df (no more than the df
+    of a mean square carrying half of the variance or more); ``log``: the t
     interval of the log (a cell in mm)."""
     S, n = rows[0][0].shape
     zero = fn([0.0] * len(rows))
@@ -332,6 +333,8 @@ def _independent(rows, fn, log=False):
         terms += [(1, ms_s, S - 1), (-1, ms_i, (S - 1) * (n - 1))]
     total = sum(c * m for c, m, _ in terms)
     df = total ** 2 / sum((c * m) ** 2 / d for c, m, d in terms)
+    # a mean square carrying at least half of the variance bounds the df by its own
+    df = min([df] + [d for c, m, d in terms if c * m >= 0.5 * total])
     se = np.sqrt(total / (S * n))
     q = stats.t.ppf(0.975, df)
     if log:

@@ -113,3 +113,20 @@ def test_coverage_experiment_smoke(tmp_path):
     assert "| t | 3 | 20 |" in (tmp_path / "coverage.md").read_text()
     assert mod.main(argv + ["--resume"]) == 0  # nothing left to do: the rows are kept
     assert len(json.loads((tmp_path / "coverage.json").read_text())["rows"]) == 3
+
+
+def test_a_dominant_mean_square_bounds_the_degrees_of_freedom():
+    from bsp_fast.metrics.hierarchical import bounded_df, satterthwaite
+
+    # seed term 0.8 of the variance on 2 df beside a recording term on 199 df:
+    # Satterthwaite says 1 / (0.8^2 / 2 + 0.2^2 / 199) = 3.12 df; the bound keeps 2
+    terms = [(1.0, 0.8, 2, "seed"), (1.0, 0.2, 199, "recording")]
+    assert satterthwaite(terms)[1] == pytest.approx(1 / (0.64 / 2 + 0.04 / 199))
+    assert bounded_df(terms) == (pytest.approx(1.0), 2.0)
+    # no term carries half: Satterthwaite's df unchanged (0.4 on 4 df, 0.6 split in two)
+    terms = [(1.0, 0.4, 4, "seed"), (1.0, 0.3, 19, "recording"), (1.0, 0.3, 19, "other")]
+    assert bounded_df(terms) == satterthwaite(terms)
+    # the share is of the whole variance, a negative interaction term included
+    terms = [(1.0, 0.5, 4, "seed"), (1.0, 0.6, 19, "recording"),
+             (-1.0, 0.1, 76, "interaction")]
+    assert bounded_df(terms)[1] == 4.0

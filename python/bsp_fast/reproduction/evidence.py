@@ -2,7 +2,8 @@
 marks"): each cell the mean ± std over seeds and a 95 % interval over seeds *and* test
 recordings, each of the report's findings marked from the same seed, recording and
 interaction variance components (:func:`bsp_fast.metrics.hierarchical.variance_components`,
-Satterthwaite's degrees of freedom; a cell's interval respects its metric's range),
+Satterthwaite's degrees of freedom bounded by a dominant mean square's; a cell's interval
+respects its metric's range),
 Holm-Bonferroni over the table's family of comparisons, with the probability of
 improvement beside each comparison of two rows.
 
@@ -53,7 +54,8 @@ CLIP_METRICS = {"auroc": "auroc", "ap": "average_precision"}
 def statistics(res: dict | None = None) -> dict:
     """What the cells' intervals and the marks are (saved in ``results.json``)."""
     return {"interval": "seed, recording and seed x recording variance components of the "
-                        "linearised per-seed, per-recording sums, Satterthwaite df, rows "
+                        "linearised per-seed, per-recording sums, Satterthwaite df (no more "
+                        "than that of a mean square carrying half the variance), rows "
                         "paired on the recordings of one dataset and on shared seed "
                         "numbers; a cell's interval respects its metric's range (fractions: "
                         "Clopper-Pearson at the effective sample size, mm: on the log)",
