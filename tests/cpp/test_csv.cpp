@@ -550,3 +550,105 @@ TEST_CASE("UTF-8 check: Python's strict decoder's rules, and the first bad strin
   numbers_only.check_duplicates = false;
   check_utf8(read_pose_csv(path, numbers_only));  // no string column was read: nothing to check
 }
+
+namespace {
+// Over 13 MB (three threads get a range each): ids first seen anywhere, blank lines, CRLF
+// and LF lines mixed, rows that cross the 1 MB buffers and the ranges; `ending` is the end
+// of the last row ("" leaves it without a line end).
+std::string one_pass_file(const std::string& ending) {
+  std::string text = header_line();
+  std::mt19937 rng(59);
+  for (int i = 1; text.size() < (std::size_t{13} << 20); ++i) {
+    const std::string id = "clip-" + std::to_string(rng() % (i / 200 + 2));
+    const bool crlf = rng() % 3 == 0;
+    text += join(row_cells(i, id), crlf ? "\r\n" : "\n");
+    if (rng() % 50 == 0) text += rng() % 2 ? "\n" : "\r\n";  // a blank line
+  }
+  return text + join(row_cells(1 << 20, "clip-last"), ending.c_str());
+}
+
+void check_same_columns(PoseTable& a, PoseTable& b) {
+  REQUIRE(a.rows == b.rows);
+  CHECK(a.line == b.line);
+  CHECK(a.file_crc32 == b.file_crc32);
+  CHECK(a.file_bytes == b.file_bytes);
+  for (const std::string& name : a.columns_present) {
+    INFO(name);
+    const PoseColumn x = pose_column(a, name), y = pose_column(b, name);
+    if (x.strings) {
+      CHECK(x.strings->values == y.strings->values);  // first-seen order
+      CHECK(x.strings->codes == y.strings->codes);
+    } else if (x.ints) {
+      CHECK(*x.ints == *y.ints);
+    } else if (x.bools) {
+      CHECK(*x.bools == *y.bools);
+      CHECK(*x.valid == *y.valid);
+    } else {
+      CHECK(std::memcmp(x.floats->data(), y.floats->data(), x.floats->size() * 4) == 0);
+    }
+  }
+}
+}  // namespace
+
+TEST_CASE("a deferred read indexes and parses in one pass: the two-pass table, any threads") {
+  TempDir tmp;
+  const std::vector<std::string> poses = {"frame.pedestrian.pose.world",
+                                          "frame.pedestrian.pose.relative"};
+  for (const char* ending : {"\n", "\r\n", ""}) {
+    const std::string p = tmp.write("one.csv", one_pass_file(ending));
+    PoseTable full = read_pose_csv(p);  // two passes, nothing deferred
+    for (int threads : {1, 2, 3}) {
+      INFO("threads " << threads << ", ending '" << ending << "'");
+      CsvReadOptions o;
+      o.threads = threads;
+      o.deferred = poses;
+      PoseTable t = read_pose_csv(p, o);
+      CHECK(t.columns_present.size() == kPoseCsvColumnCount - 2);
+      check_same_columns(t, full);
+      // Each row's bytes: the deferred cells read from them are the up-front values.
+      const DeferredCells cells(t, o);
+      std::vector<std::size_t> rows(t.rows);
+      for (std::size_t r = 0; r < t.rows; ++r) rows[r] = r;
+      std::vector<float> out(t.rows * cells.floats_per_row());
+      std::vector<char> buf;
+      cells.read(rows.data(), rows.size(), out.data(), buf);
+      const std::size_t k = cells.floats_per_row();
+      bool same = true;
+      for (std::size_t r = 0; r < t.rows && same; ++r)
+        same = std::memcmp(&out[r * k + static_cast<std::size_t>(cells.offset_of(17))],
+                           &full.pose_world[r * 156], 156 * 4) == 0 &&
+               std::memcmp(&out[r * k + static_cast<std::size_t>(cells.offset_of(19))],
+                           &full.pose_relative[r * 156], 156 * 4) == 0;
+      CHECK(same);
+    }
+  }
+}
+
+TEST_CASE("a bad row read in one pass is named as the two-pass read names it") {
+  TempDir tmp;
+  std::string text = one_pass_file("\n");
+  CsvReadOptions o;
+  o.deferred = {"frame.pedestrian.pose.world"};
+  // A bad integer in a row of each third of the file, in the rows that cross the threads'
+  // ranges (the third and the half of the file), and on the last line.
+  const std::size_t third = (text.size() + 2) / 3, half = (text.size() + 1) / 2;
+  for (const std::size_t at : {text.size() / 20, third, half, 2 * third, text.size() / 2 + 7777,
+                               text.size() - 1}) {
+    std::string bad = text;
+    const std::size_t row = bad.rfind("\nclip-", at);
+    const std::size_t cell = bad.find(",1600,", row);
+    bad.replace(cell, 6, ",16x0,");
+    const std::string p = tmp.write("bad.csv", bad);
+    const std::string expected = error_of(p);
+    CHECK(expected.find("column 'camera.width'") != std::string::npos);
+    for (int threads : {1, 2, 3}) {
+      o.threads = threads;
+      CHECK(error_of(p, o) == expected);
+    }
+  }
+  // Cut in the middle of the last row: the two-pass read's "no line end" error.
+  const std::string p = tmp.write("cut.csv", text.substr(0, text.size() - 300));
+  o.threads = 3;
+  CHECK(error_of(p, o) == error_of(p));
+  CHECK(error_of(p, o).find("(the last line has no line end") != std::string::npos);
+}

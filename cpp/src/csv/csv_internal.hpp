@@ -100,6 +100,16 @@ void parse_rows(const InputFile& file, const Lines& lines, const std::vector<std
                 const std::vector<int>& cols, PoseTable& t, int threads,
                 std::atomic<std::uint64_t>* rows_done = nullptr);
 
+// One read of the whole file instead of two (the line index, then the rows): each thread
+// scans a byte range for its newlines and CRC-32 and parses the rows that end in it from
+// the same buffers into a table of its own; the tables are then joined in file order into
+// t's columns (`cols` as for parse_rows), with t.line, t.row_begin/row_end and
+// t.file_crc32. Used when the table defers the big columns (csv.hpp): what it holds is then
+// small, and the copy cheap. Returns false, leaving t incomplete, when a row is bad: the
+// caller then reads the file with index_lines + parse_rows, which name the first bad row.
+bool scan_parse_rows(const InputFile& file, const std::vector<int>& cols, PoseTable& t,
+                     int threads, std::atomic<std::uint64_t>* rows_done = nullptr);
+
 // ------------------------------------------------------------------------ scanners
 inline const char* skip_spaces(const char* p, const char* end) {
   while (p < end && *p == ' ') ++p;

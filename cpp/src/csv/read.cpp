@@ -311,19 +311,66 @@ PoseTable read_pose_csv(const std::string& path, const CsvReadOptions& opt) {
 }
 
 namespace {
+// A '\r' left inside the first line means CR-only line ends (classic Mac): the whole file
+// would read as a header and no rows. Refused rather than converted to nothing.
+void refuse_cr_only(const std::string& header, const std::string& path) {
+  if (const std::size_t cr = header.find('\r'); cr != std::string_view::npos)
+    throw CsvParseError(path + ", line 1 (header): found a carriage return without a line "
+                        "feed at byte " + std::to_string(cr) + ": CR-only line ends are not "
+                        "supported (expected '\\n' or '\\r\\n' line ends)");
+}
+
+// The first line without its line end (all of the file when it holds no '\n').
+std::string read_header(const InputFile& file) {
+  std::string header;
+  for (std::size_t at = 0; at < file.size();) {
+    const std::size_t n = std::min<std::size_t>(std::size_t{1} << 16, file.size() - at);
+    header.resize(at + n);
+    file.read(at, n, header.data() + at);
+    const std::size_t nl = header.find('\n', at);
+    at += n;
+    if (nl != std::string::npos) {
+      header.resize(nl);
+      break;
+    }
+  }
+  if (!header.empty() && header.back() == '\r') header.pop_back();
+  return header;
+}
+
+// With deferred columns the rows are parsed in the pass that indexes the file (csv_detail::
+// scan_parse_rows): one read of it instead of two. False when a row is bad: t is then read
+// again the two-pass way, whose error names it.
+bool parse_one_pass(const InputFile& file, const CsvReadOptions& opt,
+                    const std::vector<bool>& wanted, int threads, PoseTable& t) {
+  const std::string header = read_header(file);
+  refuse_cr_only(header, t.path);
+  const std::vector<std::string> names = split_header(header, t.path);
+  std::vector<int> cols = map_header(names, wanted, opt, t);
+  defer_columns(opt, names, cols, t);
+  t.file_bytes = file.size();
+  t.file_mtime_ns = file.mtime_ns();
+  if (!csv_detail::scan_parse_rows(file, cols, t, threads, opt.rows_done)) return false;
+  if (opt.rows_total) *opt.rows_total = t.rows;
+  return true;
+}
+
 void parse_file(const InputFile& file, const CsvReadOptions& opt,
                 const std::vector<bool>& wanted, int threads, PoseTable& t) {
   const std::string& path = file.path();
   t.path = path;
+  if (!opt.deferred.empty()) {
+    if (parse_one_pass(file, opt, wanted, threads, t)) {
+      if (opt.check_duplicates) check_duplicates(t);
+      return;
+    }
+    t = PoseTable();
+    t.path = path;
+  }
   const csv_detail::Lines lines = index_lines(file, threads);
   t.file_bytes = file.size();
   t.file_crc32 = lines.crc32;
-  // A '\r' left inside the first line means CR-only line ends (classic Mac): the whole
-  // file would read as a header and no rows. Refused rather than converted to nothing.
-  if (const std::size_t cr = lines.header.find('\r'); cr != std::string_view::npos)
-    throw CsvParseError(path + ", line 1 (header): found a carriage return without a line "
-                        "feed at byte " + std::to_string(cr) + ": CR-only line ends are not "
-                        "supported (expected '\\n' or '\\r\\n' line ends)");
+  refuse_cr_only(lines.header, path);
   const std::vector<std::string> names = split_header(lines.header, path);
   std::vector<int> cols = map_header(names, wanted, opt, t);
   t.rows = lines.begin.size();

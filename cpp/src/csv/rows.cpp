@@ -2,6 +2,13 @@
 // buffer at a time and writing straight into the preallocated columns. Strings are
 // dictionary-encoded per block and the block dictionaries merged in file order afterwards,
 // so codes (first-seen order) and every other value are identical for any thread count.
+// With deferred columns (csv.hpp) the rows are parsed in the pass that finds the lines and
+// the CRC-32 (scan_parse_rows), from the same buffers: one read of the file, not two.
+#include <libdeflate.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <cstring>
 #include <deque>
 #include <memory>
 #include <mutex>
@@ -86,11 +93,29 @@ inline bool parse_cell(const Target& t, std::size_t row, const char*& p, const c
   return false;
 }
 
+// Parses one row's text [line, end) into row `row` of the targets' columns; on a bad cell
+// records where in b and returns false.
+bool parse_line(const std::vector<Target>& targets, std::size_t row, const char* line,
+                const char* end, Block& b) {
+  const std::size_t n = targets.size();
+  const char* p = line;
+  for (std::size_t c = 0; c < n; ++c) {
+    const bool ok = parse_cell(targets[c], row, p, end, b) &&
+                    (c + 1 < n ? (p < end && *p++ == ',') : p == end);
+    if (!ok) {
+      b.failed_row = row;
+      b.failed_cell = c;
+      b.failed_text.assign(line, end);
+      return false;
+    }
+  }
+  return true;
+}
+
 // Parses rows [b.lo, b.hi), reading them from the file about kScanBytes at a time (at least
 // one whole row); stops at the first bad row and records where.
 void parse_block(const InputFile& file, const Lines& lines, const std::vector<Target>& targets,
                  Block& b, std::atomic<std::uint64_t>* rows_done) {
-  const std::size_t n = targets.size();
   std::vector<char> buf;
   for (std::size_t first = b.lo; first < b.hi;) {
     const std::size_t from = lines.begin[first];
@@ -101,19 +126,9 @@ void parse_block(const InputFile& file, const Lines& lines, const std::vector<Ta
     file.read(from, bytes, buf.data());
     for (std::size_t row = first; row < last; ++row) {
       if (rows_done && (row - b.lo) % 256 == 255) *rows_done += 256;
-      const char* const line = buf.data() + (lines.begin[row] - from);
-      const char* p = line;
-      const char* end = buf.data() + (lines.end[row] - from);
-      for (std::size_t c = 0; c < n; ++c) {
-        const bool ok = parse_cell(targets[c], row, p, end, b) &&
-                        (c + 1 < n ? (p < end && *p++ == ',') : p == end);
-        if (!ok) {
-          b.failed_row = row;
-          b.failed_cell = c;
-          b.failed_text.assign(line, end);
-          return;
-        }
-      }
+      if (!parse_line(targets, row, buf.data() + (lines.begin[row] - from),
+                      buf.data() + (lines.end[row] - from), b))
+        return;
     }
     first = last;
   }
@@ -175,6 +190,199 @@ void merge_strings(const std::vector<std::unique_ptr<Block>>& blocks,
   }
 }
 
+// ---------------------------------------------------------------- one pass (scan_parse_rows)
+
+// One byte range [lo, hi) of the file read once: its CRC-32, its newlines, and the rows of
+// the lines that end in it, parsed into a table of its own as the buffers are read. The
+// line ending at the range's first newline began in an earlier range; it is parsed once
+// every range is scanned, into row 0 (kept free) with dictionaries of its own (`first`),
+// so that the string codes stay in first-seen order.
+struct Part {
+  std::size_t lo = 0, hi = 0;
+  std::uint32_t crc = 0;
+  std::size_t newlines = 0;                          // '\n' bytes in [lo, hi)
+  std::size_t first_nl = kNoRow, last_nl = kNoRow;   // where the first and last are
+  PoseTable table;                                   // row 0, then the rows parsed here
+  std::vector<std::uint64_t> begin, end;             // bytes of rows 1.. (row r at r - 1)
+  std::vector<std::size_t> nl_index;                 // index of the '\n' ending each, here
+  Block rows, first;                                 // dictionaries and failure
+  bool has_first = false;                            // row 0 holds a line
+  std::uint64_t first_begin = 0, first_end = 0;      // its bytes
+  bool stopped = false;                              // a bad row: the scan stopped there
+  std::size_t parsed() const { return begin.size(); }
+};
+
+// The line [s, x) of `part` (x: its '\n'; `text` its bytes): its '\r' dropped, parsed into
+// the next row of the part's table unless blank. False for a bad row.
+bool take_line(Part& part, const std::vector<Target>& targets, std::size_t s, std::size_t x,
+               const char* text) {
+  const char* end = text + (x - s);
+  if (end > text && end[-1] == '\r') --end;
+  if (end == text) return true;  // blank lines are skipped, as pandas does
+  const std::size_t row = part.parsed() + 1;
+  part.begin.push_back(s);
+  part.end.push_back(s + static_cast<std::size_t>(end - text));
+  part.nl_index.push_back(part.newlines - 1);
+  return parse_line(targets, row, text, end, part.rows);
+}
+
+// The lines of one buffer (bytes [a, a + n) in buf, newlines at nl) that begin after the
+// part's first newline; a line begun in an earlier buffer is read again whole (`spill`).
+bool take_lines(const InputFile& file, Part& part, const std::vector<int>& cols,
+                std::size_t a, const char* buf, const std::vector<std::size_t>& nl,
+                std::vector<char>& spill) {
+  int dicts = 0;
+  part.table.rows = part.parsed() + 1 + nl.size();  // room for every line that ends here
+  const std::vector<Target> targets = make_targets(cols, part.table, dicts);
+  for (const std::size_t x : nl) {
+    ++part.newlines;
+    const std::size_t s = part.last_nl + 1;  // part.last_nl: the newline before x
+    part.last_nl = x;
+    if (part.first_nl == kNoRow) {
+      part.first_nl = x;
+      continue;
+    }
+    if (s < a) {
+      spill.resize(x - s);
+      file.read(s, x - s, spill.data());
+    }
+    if (!take_line(part, targets, s, x, s < a ? spill.data() : buf + (s - a))) return false;
+  }
+  return true;
+}
+
+// Scans and parses one range (see Part); stops at the first bad row.
+void scan_part(const InputFile& file, const std::vector<int>& cols, int dicts, Part& part,
+               std::atomic<std::uint64_t>* rows_done) {
+  std::unique_ptr<char[]> buf(new char[kScanBytes]);
+  std::vector<char> spill;
+  std::vector<std::size_t> nl;
+  part.rows.dicts.resize(static_cast<std::size_t>(dicts));
+  part.first.dicts.resize(static_cast<std::size_t>(dicts));
+  for (std::size_t a = part.lo; a < part.hi; a += kScanBytes) {
+    const std::size_t n = std::min(part.hi, a + kScanBytes) - a;
+    file.read(a, n, buf.get());
+    part.crc = libdeflate_crc32(part.crc, buf.get(), n);
+    nl.clear();
+    const char* const data = buf.get();
+    for (const char* p = data; (p = static_cast<const char*>(std::memchr(
+                                    p, '\n', static_cast<std::size_t>(data + n - p))));
+         ++p)
+      nl.push_back(a + static_cast<std::size_t>(p - data));
+    const std::size_t before = part.parsed();
+    if (!take_lines(file, part, cols, a, data, nl, spill)) {
+      part.stopped = true;
+      return;
+    }
+    if (rows_done) *rows_done += part.parsed() - before;
+  }
+}
+
+// Parses row 0 of `part`: the line from just after `prev` (the file's newline before the
+// part's first one; kNoRow: none, the line is the header) up to `x`. False for a bad row.
+bool take_first_line(const InputFile& file, const std::vector<int>& cols, std::size_t prev,
+                     std::size_t x, Part& part) {
+  if (x == kNoRow || prev == kNoRow) return true;
+  std::vector<char> text(x - prev - 1);
+  file.read(prev + 1, text.size(), text.data());
+  const char* end = text.data() + text.size();
+  if (end > text.data() && end[-1] == '\r') --end;
+  if (end == text.data()) return true;  // blank
+  if (part.table.rows == 0) part.table.rows = 1;
+  int dicts = 0;
+  const std::vector<Target> targets = make_targets(cols, part.table, dicts);
+  part.first.dicts.resize(static_cast<std::size_t>(dicts));
+  part.has_first = true;
+  part.first_begin = prev + 1;
+  part.first_end = prev + 1 + static_cast<std::size_t>(end - text.data());
+  return parse_line(targets, 0, text.data(), end, part.first);
+}
+
+// Rows [from, from + n) of src's selected columns to rows [at, at + n) of t's.
+void copy_rows(PoseTable& src, std::size_t from, std::size_t n, PoseTable& t, std::size_t at,
+               const std::vector<int>& cols) {
+  for (const int c : cols) {
+    if (c < 0) continue;
+    const PoseColumn a = pose_column(src, static_cast<std::size_t>(c));
+    const PoseColumn b = pose_column(t, static_cast<std::size_t>(c));
+    const std::size_t k = a.spec->kind == CsvKind::floats ? a.spec->numbers() : 1;
+    switch (a.spec->kind) {
+      case CsvKind::floats:
+        std::copy_n(a.floats->data() + from * k, n * k, b.floats->data() + at * k);
+        break;
+      case CsvKind::integer: std::copy_n(a.ints->data() + from, n, b.ints->data() + at); break;
+      case CsvKind::boolean:
+        std::copy_n(a.bools->data() + from, n, b.bools->data() + at);
+        std::copy_n(a.valid->data() + from, n, b.valid->data() + at);
+        break;
+      case CsvKind::string:
+        std::copy_n(a.strings->codes.data() + from, n, b.strings->codes.data() + at);
+        break;
+    }
+  }
+}
+
+// The parts' rows, in file order, into t (columns, line numbers, row bytes) and the string
+// dictionaries merged in first-seen order. `base[k]`: newlines before part k.
+void gather_rows(std::vector<std::unique_ptr<Part>>& parts, const std::vector<std::size_t>& base,
+                 const std::vector<int>& cols, PoseTable& t) {
+  t.rows = 0;
+  for (const auto& p : parts) t.rows += p->parsed() + (p->has_first ? 1 : 0);
+  int dicts = 0;
+  const std::vector<Target> targets = make_targets(cols, t, dicts);
+  std::vector<std::unique_ptr<Block>> blocks;
+  std::size_t at = 0;
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    Part& p = *parts[k];
+    for (int first = p.has_first ? 1 : 0; first >= 0; --first) {  // row 0, then the others
+      const std::size_t n = first ? 1 : p.parsed();
+      copy_rows(p.table, first ? 0 : 1, n, t, at, cols);
+      for (std::size_t r = 0; r < n; ++r) {
+        t.line.push_back(static_cast<std::int64_t>(base[k] + (first ? 0 : p.nl_index[r]) + 1));
+        t.row_begin.push_back(first ? p.first_begin : p.begin[r]);
+        t.row_end.push_back(first ? p.first_end : p.end[r]);
+      }
+      auto b = std::make_unique<Block>();
+      b->lo = at, b->hi = at + n;
+      b->dicts = std::move(first ? p.first.dicts : p.rows.dicts);
+      b->dicts.resize(static_cast<std::size_t>(dicts));  // none yet in the last line's part
+      blocks.push_back(std::move(b));
+      at += n;
+    }
+    p.table = PoseTable();  // its memory back before the next part's copy
+  }
+  merge_strings(blocks, targets);
+}
+
+// After the scan (parts in file order): the CRC-32, row 0 of every part, the last line
+// when the file does not end with a newline (a part of its own), then the rows gathered
+// into t. False when a row is bad (the caller reads the file again the two-pass way, which
+// names the first bad row).
+bool finish_parts(const InputFile& file, const std::vector<int>& cols,
+                  std::vector<std::unique_ptr<Part>>& parts, PoseTable& t) {
+  std::vector<std::size_t> base;
+  std::size_t newlines = 0, prev = kNoRow;  // prev: the last newline so far
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    Part& p = *parts[k];
+    if (p.stopped || !take_first_line(file, cols, prev, p.first_nl, p)) return false;
+    t.file_crc32 = k == 0 ? p.crc
+                          : static_cast<std::uint32_t>(crc32_combine(
+                                t.file_crc32, p.crc, static_cast<z_off_t>(p.hi - p.lo)));
+    base.push_back(newlines);
+    newlines += p.newlines;
+    if (p.last_nl != kNoRow) prev = p.last_nl;
+  }
+  if (prev != kNoRow && prev + 1 < file.size()) {  // the last line has no line end
+    auto tail = std::make_unique<Part>();
+    tail->lo = tail->hi = file.size();
+    if (!take_first_line(file, cols, prev, file.size(), *tail)) return false;
+    parts.push_back(std::move(tail));
+    base.push_back(newlines);
+  }
+  gather_rows(parts, base, cols, t);
+  return true;
+}
+
 }  // namespace
 
 void parse_rows(const InputFile& file, const Lines& lines, const std::vector<std::string>& header,
@@ -203,6 +411,26 @@ void parse_rows(const InputFile& file, const Lines& lines, const std::vector<std
     throw CsvParseError(msg);
   }
   merge_strings(blocks, targets);
+}
+
+bool scan_parse_rows(const InputFile& file, const std::vector<int>& cols, PoseTable& t,
+                     int threads, std::atomic<std::uint64_t>* rows_done) {
+  int dicts = 0;
+  {
+    PoseTable none;
+    make_targets(cols, none, dicts);
+  }
+  std::mutex mutex;
+  std::vector<std::unique_ptr<Part>> parts;
+  parallel_for(file.size(), std::size_t{1} << 22, [&](std::size_t lo, std::size_t hi) {
+    auto p = std::make_unique<Part>();
+    p->lo = lo, p->hi = hi;
+    scan_part(file, cols, dicts, *p, rows_done);
+    std::lock_guard<std::mutex> lock(mutex);
+    parts.push_back(std::move(p));
+  }, threads);
+  std::sort(parts.begin(), parts.end(), [](const auto& a, const auto& b) { return a->lo < b->lo; });
+  return finish_parts(file, cols, parts, t);
 }
 
 }  // namespace bsp::csv_detail
