@@ -5,6 +5,9 @@
 // With deferred columns (csv.hpp) the rows are parsed in the pass that finds the lines and
 // the CRC-32 (scan_parse_rows), from the same buffers: one read of the file, not two.
 #include <libdeflate.h>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 #include <zlib.h>
 
 #include <algorithm>
@@ -298,27 +301,39 @@ bool take_first_line(const InputFile& file, const std::vector<int>& cols, std::s
   return parse_line(targets, 0, text.data(), end, part.first);
 }
 
-// Rows [from, from + n) of src's selected columns to rows [at, at + n) of t's.
-void copy_rows(PoseTable& src, std::size_t from, std::size_t n, PoseTable& t, std::size_t at,
-               const std::vector<int>& cols) {
+// Appends rows [from, from + n) of src's selected columns to t's (the columns are reserved
+// whole beforehand: their pages are touched as they fill, while the parts are freed).
+void append_rows(PoseTable& src, std::size_t from, std::size_t n, PoseTable& t,
+                 const std::vector<int>& cols) {
+  const auto append = [&](auto& to, const auto& v, std::size_t k) {
+    to.insert(to.end(), v.begin() + static_cast<std::ptrdiff_t>(from * k),
+              v.begin() + static_cast<std::ptrdiff_t>((from + n) * k));
+  };
   for (const int c : cols) {
     if (c < 0) continue;
     const PoseColumn a = pose_column(src, static_cast<std::size_t>(c));
     const PoseColumn b = pose_column(t, static_cast<std::size_t>(c));
-    const std::size_t k = a.spec->kind == CsvKind::floats ? a.spec->numbers() : 1;
     switch (a.spec->kind) {
-      case CsvKind::floats:
-        std::copy_n(a.floats->data() + from * k, n * k, b.floats->data() + at * k);
-        break;
-      case CsvKind::integer: std::copy_n(a.ints->data() + from, n, b.ints->data() + at); break;
+      case CsvKind::floats: append(*b.floats, *a.floats, a.spec->numbers()); break;
+      case CsvKind::integer: append(*b.ints, *a.ints, 1); break;
       case CsvKind::boolean:
-        std::copy_n(a.bools->data() + from, n, b.bools->data() + at);
-        std::copy_n(a.valid->data() + from, n, b.valid->data() + at);
+        append(*b.bools, *a.bools, 1);
+        append(*b.valid, *a.valid, 1);
         break;
-      case CsvKind::string:
-        std::copy_n(a.strings->codes.data() + from, n, b.strings->codes.data() + at);
-        break;
+      case CsvKind::string: append(b.strings->codes, a.strings->codes, 1); break;
     }
+  }
+}
+
+// Reserves t's selected columns for t.rows rows.
+void reserve_rows(PoseTable& t, const std::vector<int>& cols) {
+  for (const int c : cols) {
+    if (c < 0) continue;
+    const PoseColumn r = pose_column(t, static_cast<std::size_t>(c));
+    if (r.floats) r.floats->reserve(t.rows * r.spec->numbers());
+    if (r.ints) r.ints->reserve(t.rows);
+    if (r.bools) r.bools->reserve(t.rows), r.valid->reserve(t.rows);
+    if (r.strings) r.strings->codes.reserve(t.rows);
   }
 }
 
@@ -328,15 +343,14 @@ void gather_rows(std::vector<std::unique_ptr<Part>>& parts, const std::vector<st
                  const std::vector<int>& cols, PoseTable& t) {
   t.rows = 0;
   for (const auto& p : parts) t.rows += p->parsed() + (p->has_first ? 1 : 0);
-  int dicts = 0;
-  const std::vector<Target> targets = make_targets(cols, t, dicts);
+  reserve_rows(t, cols);
   std::vector<std::unique_ptr<Block>> blocks;
   std::size_t at = 0;
   for (std::size_t k = 0; k < parts.size(); ++k) {
     Part& p = *parts[k];
     for (int first = p.has_first ? 1 : 0; first >= 0; --first) {  // row 0, then the others
       const std::size_t n = first ? 1 : p.parsed();
-      copy_rows(p.table, first ? 0 : 1, n, t, at, cols);
+      append_rows(p.table, first ? 0 : 1, n, t, cols);
       for (std::size_t r = 0; r < n; ++r) {
         t.line.push_back(static_cast<std::int64_t>(base[k] + (first ? 0 : p.nl_index[r]) + 1));
         t.row_begin.push_back(first ? p.first_begin : p.begin[r]);
@@ -345,12 +359,17 @@ void gather_rows(std::vector<std::unique_ptr<Part>>& parts, const std::vector<st
       auto b = std::make_unique<Block>();
       b->lo = at, b->hi = at + n;
       b->dicts = std::move(first ? p.first.dicts : p.rows.dicts);
-      b->dicts.resize(static_cast<std::size_t>(dicts));  // none yet in the last line's part
       blocks.push_back(std::move(b));
       at += n;
     }
     p.table = PoseTable();  // its memory back before the next part's copy
+#ifdef __GLIBC__
+    malloc_trim(0);  // the parts were filled by other threads: their arenas keep it otherwise
+#endif
   }
+  int dicts = 0;
+  const std::vector<Target> targets = make_targets(cols, t, dicts);  // sized already
+  for (auto& b : blocks) b->dicts.resize(static_cast<std::size_t>(dicts));  // the last line's
   merge_strings(blocks, targets);
 }
 
