@@ -605,7 +605,10 @@ TEST_CASE("a deferred read indexes and parses in one pass: the two-pass table, a
       PoseTable t = read_pose_csv(p, o);
       CHECK(t.columns_present.size() == kPoseCsvColumnCount - 2);
       check_same_columns(t, full);
-      // Each row's bytes: the deferred cells read from them are the up-front values.
+      // Each row's bytes (and where its first deferred cell begins): the deferred cells
+      // read from them are the up-front values.
+      REQUIRE(t.row_skip.size() == t.rows);
+      CHECK(std::count(t.row_skip.begin(), t.row_skip.end(), PoseTable::kUnknownSkip) == 0);
       const DeferredCells cells(t, o);
       std::vector<std::size_t> rows(t.rows);
       for (std::size_t r = 0; r < t.rows; ++r) rows[r] = r;

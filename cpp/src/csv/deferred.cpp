@@ -47,16 +47,23 @@ int DeferredCells::offset_of(int index) const {
 }
 
 namespace {
-// Parses the deferred cells of one row's text [p, end) into out (each column at its
-// offset); false on a malformed cell. The other cells up to the last deferred one are
+// Parses the deferred cells of one row's text [p, end) (row `row` of the table) into out
+// (each column at its offset); false on a malformed cell. The reader recorded where the
+// first deferred cell begins (row_skip); other cells up to the last deferred one are
 // stepped over as the reader skips unselected cells (the reader already checked them, so
 // the boundaries are those it found).
 bool parse_row(const char* p, const char* end, const PoseTable& t, const std::vector<int>& offsets,
-               float* out) {
+               std::size_t row, float* out) {
   using namespace csv_detail;
   std::size_t next = 0;  // the next deferred cell (header order)
   const std::size_t n = t.header_cells, last = static_cast<std::size_t>(t.deferred_cells.back());
-  for (std::size_t c = 0; c <= last; ++c) {
+  std::size_t c = 0;  // the reader found where the first deferred cell begins: start there
+  if (row < t.row_skip.size() && t.row_skip[row] != PoseTable::kUnknownSkip &&
+      t.row_skip[row] <= static_cast<std::size_t>(end - p)) {
+    p += t.row_skip[row];
+    c = static_cast<std::size_t>(t.deferred_cells.front());
+  }
+  for (; c <= last; ++c) {
     bool ok;
     if (static_cast<std::size_t>(t.deferred_cells[next]) == c) {
       const auto column = static_cast<std::size_t>(t.deferred_columns[next++]);
@@ -88,7 +95,8 @@ void DeferredCells::read(const std::size_t* rows, std::size_t count, float* out,
     for (; k < e; ++k) {
       const char* line = buf.data() + (t_.row_begin[rows[k]] - from);
       const char* stop = buf.data() + (t_.row_end[rows[k]] - from);
-      if (!parse_row(line, stop, t_, offsets_, out + k * per_row_)) throw DeferredCellError{};
+      if (!parse_row(line, stop, t_, offsets_, rows[k], out + k * per_row_))
+        throw DeferredCellError{};
     }
   }
 }

@@ -97,12 +97,15 @@ inline bool parse_cell(const Target& t, std::size_t row, const char*& p, const c
 }
 
 // Parses one row's text [line, end) into row `row` of the targets' columns; on a bad cell
-// records where in b and returns false.
+// records where in b and returns false. `skip` (when not null): where cell `mark` begins.
 bool parse_line(const std::vector<Target>& targets, std::size_t row, const char* line,
-                const char* end, Block& b) {
+                const char* end, Block& b, std::size_t mark = kNoRow,
+                std::uint32_t* skip = nullptr) {
   const std::size_t n = targets.size();
   const char* p = line;
   for (std::size_t c = 0; c < n; ++c) {
+    if (c == mark) *skip = static_cast<std::uint32_t>(std::min<std::ptrdiff_t>(
+                       p - line, PoseTable::kUnknownSkip));
     const bool ok = parse_cell(targets[c], row, p, end, b) &&
                     (c + 1 < n ? (p < end && *p++ == ',') : p == end);
     if (!ok) {
@@ -211,6 +214,9 @@ struct Part {
   Block rows, first;                                 // dictionaries and failure
   bool has_first = false;                            // row 0 holds a line
   std::uint64_t first_begin = 0, first_end = 0;      // its bytes
+  std::size_t mark = kNoRow;                         // the first deferred cell
+  std::vector<std::uint32_t> skip;                   // where it begins in each row
+  std::uint32_t first_skip = PoseTable::kUnknownSkip;
   bool stopped = false;                              // a bad row: the scan stopped there
   std::size_t parsed() const { return begin.size(); }
 };
@@ -226,7 +232,8 @@ bool take_line(Part& part, const std::vector<Target>& targets, std::size_t s, st
   part.begin.push_back(s);
   part.end.push_back(s + static_cast<std::size_t>(end - text));
   part.nl_index.push_back(part.newlines - 1);
-  return parse_line(targets, row, text, end, part.rows);
+  part.skip.push_back(PoseTable::kUnknownSkip);
+  return parse_line(targets, row, text, end, part.rows, part.mark, &part.skip.back());
 }
 
 // The lines of one buffer (bytes [a, a + n) in buf, newlines at nl) that begin after the
@@ -281,6 +288,11 @@ void scan_part(const InputFile& file, const std::vector<int>& cols, int dicts, P
   }
 }
 
+// The header cell of the first deferred column (kNoRow: none).
+std::size_t first_deferred_cell(const PoseTable& t) {
+  return t.deferred_cells.empty() ? kNoRow : static_cast<std::size_t>(t.deferred_cells.front());
+}
+
 // Parses row 0 of `part`: the line from just after `prev` (the file's newline before the
 // part's first one; kNoRow: none, the line is the header) up to `x`. False for a bad row.
 bool take_first_line(const InputFile& file, const std::vector<int>& cols, std::size_t prev,
@@ -298,7 +310,7 @@ bool take_first_line(const InputFile& file, const std::vector<int>& cols, std::s
   part.has_first = true;
   part.first_begin = prev + 1;
   part.first_end = prev + 1 + static_cast<std::size_t>(end - text.data());
-  return parse_line(targets, 0, text.data(), end, part.first);
+  return parse_line(targets, 0, text.data(), end, part.first, part.mark, &part.first_skip);
 }
 
 // Appends rows [from, from + n) of src's selected columns to t's (the columns are reserved
@@ -355,6 +367,7 @@ void gather_rows(std::vector<std::unique_ptr<Part>>& parts, const std::vector<st
         t.line.push_back(static_cast<std::int64_t>(base[k] + (first ? 0 : p.nl_index[r]) + 1));
         t.row_begin.push_back(first ? p.first_begin : p.begin[r]);
         t.row_end.push_back(first ? p.first_end : p.end[r]);
+        t.row_skip.push_back(first ? p.first_skip : p.skip[r]);
       }
       auto b = std::make_unique<Block>();
       b->lo = at, b->hi = at + n;
@@ -394,6 +407,7 @@ bool finish_parts(const InputFile& file, const std::vector<int>& cols,
   if (prev != kNoRow && prev + 1 < file.size()) {  // the last line has no line end
     auto tail = std::make_unique<Part>();
     tail->lo = tail->hi = file.size();
+    tail->mark = first_deferred_cell(t);
     if (!take_first_line(file, cols, prev, file.size(), *tail)) return false;
     parts.push_back(std::move(tail));
     base.push_back(newlines);
@@ -444,6 +458,7 @@ bool scan_parse_rows(const InputFile& file, const std::vector<int>& cols, PoseTa
   parallel_for(file.size(), std::size_t{1} << 22, [&](std::size_t lo, std::size_t hi) {
     auto p = std::make_unique<Part>();
     p->lo = lo, p->hi = hi;
+    p->mark = first_deferred_cell(t);
     scan_part(file, cols, dicts, *p, rows_done);
     std::lock_guard<std::mutex> lock(mutex);
     parts.push_back(std::move(p));

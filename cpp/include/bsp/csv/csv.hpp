@@ -52,6 +52,10 @@ struct PoseTable {
   // file [row_begin, row_end), the file's modification time, the header's cell count and
   // the deferred columns with the header cell of each, in header order.
   std::vector<std::uint64_t> row_begin, row_end;
+  // Bytes from each row's start to its first deferred cell, found while the row was parsed
+  // (DeferredCells starts there); empty, or kUnknownSkip for a row, when not known.
+  std::vector<std::uint32_t> row_skip;
+  static constexpr std::uint32_t kUnknownSkip = 0xFFFFFFFFu;
   std::int64_t file_mtime_ns = 0;
   std::size_t header_cells = 0;
   std::vector<int> deferred_columns, deferred_cells;
