@@ -9,7 +9,9 @@ Same run, same generated file (random float32 poses, ~10 KB per row like the rea
    dataset) with `bsp-convert` in a child process: wall time and peak resident memory,
    uncompressed and with --compress (file size, write time), each next to `wc -l` and
    `bsp_fast.read_csv` (pose columns, in this process) of the same file timed just before
-   it, and the conversion's ratio to each (issue 59: at most 8x `wc -l`).
+   it, and the conversion's ratio to each (issue 59: at most 8x `wc -l`). Each conversion
+   writes a new file: the previous run's output is deleted first, untimed (--replace keeps
+   it, and the conversion then replaces it).
 
     PYTHONPATH=python:build/<name>/py python3 benchmarks/bench_convert.py [--rows 225000] [--csv-rows 20000]
 
@@ -111,6 +113,11 @@ def main(argv=None) -> int:
     ap.add_argument("--compressed", action="store_true",
                     help="with --convert-only: the --compress conversion instead")
     ap.add_argument("--repeat", type=int, default=1, help="time each conversion N times")
+    ap.add_argument("--replace", action="store_true",
+                    help="convert over the previous run's output (--force replaces it) instead "
+                         "of deleting it first, untimed: on ext4 the rename then writes the new "
+                         "file back and the old one's blocks are freed (discarded, with the "
+                         "discard mount option) in the converting process")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
         tmp = Path(args.data) if args.data else Path(tmp)
@@ -142,6 +149,7 @@ def convert_table(tmp: Path, args, runs) -> int:
     size = os.path.getsize(full / "data.csv") / 1e9
     print(f"\nWhole conversion of {args.rows:,} rows ({size:.2f} GB data.csv, "
           f"{f'generated in {t:.0f} s' if t else 'reused'}), defaults (L = 30), 2 threads, "
+          f"{'over the previous output' if args.replace else 'into a new file'}, "
           f"bsp_fast from {Path(bf.__file__).parent}, load {os.getloadavg()[0]:.2f}:\n")
     # CPU s: user + system time of the child, all threads (less sensitive than the wall
     # time to other work on the machine, though not immune: caches and memory are shared).
@@ -152,6 +160,8 @@ def convert_table(tmp: Path, args, runs) -> int:
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for label, extra in runs:
         for _ in range(args.repeat):
+            if not args.replace:  # untimed, and before the references: memory as it would be
+                (tmp / "out.h5").unlink(missing_ok=True)
             load = os.getloadavg()[0]
             wc, rd = references(full / "data.csv")
             wall, peak, mb, cpu = run_convert(full, tmp / "out.h5", *extra)
