@@ -19,6 +19,7 @@ from bsp_fast.training import config as C  # noqa: E402
 from bsp_fast.training.evaluate import evaluate  # noqa: E402
 from bsp_fast.training.setup import make_datamodule, prepare_data  # noqa: E402
 from bsp_fast.training.train import main as train_main, train  # noqa: E402
+from bsp_fast.defaults import SEED  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -268,15 +269,15 @@ def test_the_documented_table_command_runs_on_fixtures(table_data, monkeypatch, 
         assert f"| {row} |" in text
         r = res["results"][row]
         assert r["metrics"]["pck_0.05"] is not None
-        per = json.loads((base / row / "test_per_recording.json").read_text())
+        per = json.loads((base / row / f"seed-{SEED}" / "test_per_recording.json").read_text())
         videos = {rec.rsplit("/", 1)[0] for rec in per["test"]["recordings"]}
         assert videos == {test_video[row.rsplit("-on-", 1)[1]]}, (row, videos)
     # one mix, two test sets: the same weights (same seed, val on the mix), other numbers
-    a, b = (torch.load(base / r / "checkpoints" / "best.ckpt", weights_only=True)["state_dict"]
-            for r in ("jaad-on-jaad", "jaad-on-pie"))
+    a, b = (torch.load(base / r / f"seed-{SEED}" / "checkpoints" / "best.ckpt",
+                       weights_only=True)["state_dict"] for r in ("jaad-on-jaad", "jaad-on-pie"))
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
     ma, mb = (res["results"][r]["metrics"]["pck_0.05"] for r in ("jaad-on-jaad", "jaad-on-pie"))
     assert ma != mb
-    cfg = C.read_yaml(base / "jaad-carla-on-pie" / "config.yaml")
+    cfg = C.read_yaml(base / "jaad-carla-on-pie" / f"seed-{SEED}" / "config.yaml")
     assert cfg["test_on"] == "pie" and cfg["mix"]["sources"][1] == {
         "name": "carla_bsp", "share": 0.8, "data": True}

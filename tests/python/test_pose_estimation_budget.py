@@ -160,6 +160,14 @@ def c32(tmp_path_factory):
     return h5
 
 
+def _cmdline(pid: int) -> str:
+    """A process's command line, "" once it has exited (a pool's helpers come and go)."""
+    try:
+        return (Path("/proc") / str(pid) / "cmdline").read_bytes().decode(errors="replace")
+    except OSError:
+        return ""
+
+
 def _children(pid: int) -> list:
     """The processes whose parent is ``pid`` (from /proc)."""
     out = []
@@ -198,8 +206,7 @@ def test_sigterm_to_the_curves_parent_alone_stops_its_workers(c32, tmp_path):
         workers = []
         while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:
             # the pool's two workers (spawned interpreters), not its resource tracker
-            workers = [c for c in _children(proc.pid) if "spawn_main" in
-                       (Path("/proc") / str(c) / "cmdline").read_bytes().decode(errors="replace")]
+            workers = [c for c in _children(proc.pid) if "spawn_main" in _cmdline(c)]
             time.sleep(0.1)
         assert len(workers) == 2, proc.stderr.read().decode()[-2000:]
         os.kill(proc.pid, signal.SIGTERM)  # the parent only, as a scheduler may do

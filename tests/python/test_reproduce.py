@@ -13,6 +13,7 @@ import pytest
 from bsp_testdata import table_clip_files
 import torch
 
+from bsp_fast.defaults import SEED
 from bsp_fast.training import config as C
 from bsp_fast import reproduction as R
 from bsp_fast.reproduction.findings import ONE_RUN
@@ -41,14 +42,16 @@ def test_tables_resolve_to_bsp_train_configs(table, tmp_path):
     # rows registered in the full budget (moved: {to: full}) are not run in quick
     trained = [r["name"] for r in tab["rows"] if not r.get("initial_of")
                and (r.get("moved") or {}).get("to") in (None, "quick")]
-    assert [p.stem for p in cfgs] == sorted(trained)
+    # a table of one seed: the default seed's run of each row
+    assert [p.stem for p in cfgs] == sorted(f"{n}-seed-{SEED}" for n in trained)
     rows = {r["name"]: r for r in tab["rows"]}
     for path in cfgs:  # exactly what bsp-train --config reads
         cfg = C.validate(C.defaults() | C.read_yaml(path))
-        own = (rows[path.stem].get("budgets") or {}).get("quick") or {}
+        name = path.stem.removesuffix(f"-seed-{SEED}")
+        own = (rows[name].get("budgets") or {}).get("quick") or {}
         epochs = own.get("epochs", tab["budgets"]["quick"]["epochs"])
         assert cfg["task"] == tab["task"] and cfg["epochs"] == epochs
-        assert cfg["out"].endswith(f"{table}-quick/{path.stem}")
+        assert cfg["seed"] == SEED and cfg["out"].endswith(f"{table}-quick/{name}/seed-{SEED}")
 
 
 def test_row_budget_options_override_the_table_budget_only_for_that_budget(tmp_path):
@@ -275,11 +278,11 @@ def test_smoke_run_prints_table_and_consistent_marks(table, data, tmp_path, caps
         m = next(iter(tab["metrics"]))
         col = header.index(tab["metrics"][m]["label"])
         assert cells[col] == format_value(tab, m, saved["results"][name]["metrics"][m])
-        if saved["results"][name]["epochs"] is not None:  # the cost of the row's own model
+        if saved["results"][name]["source"] != "initial":  # the cost of the row's own model
             from bsp_fast.models.cost import parameter_count
             from bsp_fast.training.module import load_module
 
-            run = Path(saved["results"][name]["run"])
+            run = Path(saved["results"][name]["seeds"][str(SEED)]["run"])
             net = load_module(run / "checkpoints" / "best.ckpt").net
             assert cells[-3] == f"{parameter_count(net):,}"
             assert float(cells[-2].replace(",", "")) > 0

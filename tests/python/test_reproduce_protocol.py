@@ -181,9 +181,9 @@ def test_results_record_the_hash_commit_and_time(finished):
     assert prot["code"] == P.code_version()
     made = dt.datetime.strptime(prot["utc"], "%Y-%m-%dT%H:%M:%SZ").replace(tzinfo=dt.timezone.utc)
     assert dt.timedelta(0) <= dt.datetime.now(dt.timezone.utc) - made < dt.timedelta(hours=1)
-    assert prot["runs"]["clean"]["hash"] == want
+    assert prot["runs"]["clean/seed-22742"]["hash"] == want
     ledger = json.loads((finished["base"] / P.LEDGER).read_text())
-    assert ledger["runs"]["clean"] == prot["runs"]["clean"]
+    assert ledger["runs"]["clean/seed-22742"] == prot["runs"]["clean/seed-22742"]
     assert f"Registered protocol: `tiny_ae.yaml` sha256 {want[:12]}" in finished["text"]
 
 
@@ -264,7 +264,7 @@ def test_deviations_appended_later_keep_the_hash_and_are_printed(finished, tmp_p
     argv[0] = table
     code, text, err = _main(argv)
     assert code == 0, err
-    assert "[clean] reusing" in text  # no training
+    assert "[clean seed 22742] reusing" in text  # no training
     assert ("- 2026-11-23, commit 38006fb, after test numbers were seen: an example "
             "deviation, appended after the runs Why: under-trained") in text
     saved = (finished["base"] / "results.md").read_text()
@@ -281,27 +281,27 @@ def test_a_changed_table_refuses_to_mix_unless_allowed(finished, tmp_path):
     argv[0] = table
     # options given over the table file's are part of the protocol; the loader's are not
     code, text, err = _main(finished["argv"] + ["--set", "workers=0"])
-    assert code == 0 and "[clean] reusing" in text, err
+    assert code == 0 and "[clean seed 22742] reusing" in text, err
     code, _, err = _main(finished["argv"] + ["--set", "lr=0.01"])
     assert code == 2 and f'now {old[:12]}, options {{"lr": 0.01}}' in err
-    files = [base / "results.json", base / "results.md", base / "configs" / "clean.yaml",
+    files = [base / "results.json", base / "results.md", base / "configs" / "clean-seed-22742.yaml",
              base / P.LEDGER]
     before = [p.read_bytes() for p in files]
     code, text, err = _main(argv)
     assert code == 2
     assert "another version of the table file" in err and old[:12] in err
-    assert new[:12] in err and "--allow-changed" in err and "clean" in err
+    assert new[:12] in err and "--allow-changed" in err and "clean/seed-22742" in err
     assert [p.read_bytes() for p in files] == before  # nothing written
     code, text, err = _main(argv + ["--allow-changed"])
     assert code == 0, err
     prot = json.loads((base / "results.json").read_text())["protocol"]
     assert (prot["hash"], prot["mixed"], prot["allow_changed"]) == (
-        new, {"clean": {"hash": old, "options": {}}}, True)
-    assert prot["runs"]["clean"]["hash"] == old  # the run keeps the hash it was made under
+        new, {"clean/seed-22742": {"hash": old, "options": {}}}, True)
+    assert prot["runs"]["clean/seed-22742"]["hash"] == old  # the run keeps the hash it was made under
     assert f"**Mixed protocols (--allow-changed):** 1 run(s) were made under protocol hash " \
            f"{old[:12]}" in text
     ledger = json.loads((base / P.LEDGER).read_text())
-    assert ledger["allowed_changes"][-1]["runs"] == {"clean": {"hash": old, "options": {}}}
+    assert ledger["allowed_changes"][-1]["runs"] == {"clean/seed-22742": {"hash": old, "options": {}}}
     assert ledger["allowed_changes"][-1]["hash"] == new
     # runs made before runs were recorded (no ledger) are refused too
     (base / P.LEDGER).unlink()
@@ -316,7 +316,7 @@ def test_published_table_renders_into_its_readme_section(finished, monkeypatch):
     assert str(finished["root"]) not in json.dumps(doc)  # no machine's paths
     assert doc["protocol"]["hash"] == P.table_hash(finished["table"])
     sums = json.loads((results_dir / doc["per_recording"]).read_text())
-    run = json.loads((base / "clean" / "test_per_recording.json").read_text())
+    run = json.loads((base / "clean" / "seed-22742" / "test_per_recording.json").read_text())
     assert sums["clean"]["22742"]["test"]["metrics"]["pck_0.05"] == \
         run["test"]["metrics"]["pck_0.05"]
     assert set(sums["clean"]["22742"]["test"]["metrics"]) <= set(doc["metrics"]) | {"f1_constant"}
@@ -465,7 +465,7 @@ def test_max_seeds_caps_a_costly_row_and_needs_its_reason(tmp_path):
     got = {r["name"]: row_seeds(r, [7, 8, 9, 10, 11], "quick") for r in tab["rows"]}
     assert got["poseformer"] == [7, 8, 9] and got["lstm"] == [7, 8, 9, 10, 11]
     assert row_seeds(tab["rows"][0], [7, 8, 9, 10, 11], "smoke") == [7, 8, 9, 10, 11]
-    assert row_seeds(tab["rows"][0], None, "quick") is None  # the one-run table
+    assert row_seeds(tab["rows"][0], [7], "quick") == [7]  # a table of one seed
     del doc["rows"][0]["max_seeds_why"]
     with pytest.raises(ValueError, match="max_seeds_why"):
         R.load_table(_write(tmp_path / "no_reason.yaml", doc))

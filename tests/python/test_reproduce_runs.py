@@ -15,6 +15,7 @@ from bsp_testdata import table_clip_files
 from bsp_fast.reproduction import evidence as E
 from bsp_fast import reproduction as R
 from bsp_fast.reproduction import runner as S
+from bsp_fast.defaults import SEED
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -110,9 +111,9 @@ def test_full_budget_rows_run_two_batches_on_the_cpu(table, data, tmp_path):
     res = R.run_table(tab, data[table], "full", tmp_path, overrides=over, rows=rows,
                       log=lambda s: 0)
     assert sorted(res["results"]) == sorted(rows)
-    for name, r in res["results"].items():
+    for name, r in res["results"].items():  # a table of one seed: the default seed's run
         first = next(iter(tab["metrics"]))
-        assert r["metrics"].get(first) is not None, name
+        assert r["seeds"][str(SEED)]["metrics"].get(first) is not None, name
 
 
 def test_split_seeds_set_the_converters_split_seed(tmp_path, capsys):

@@ -65,7 +65,7 @@ def draw_figures(tab: dict, res: dict, out_dir=None) -> list:
     from .curves import save_figure
 
     written = []
-    n_seeds = len(res.get("seeds") or [1])
+    n_seeds = len(res["seeds"])
     for fig in figs:
         series = figure_series(fig, res)
         if not series:

@@ -119,7 +119,7 @@ def _rows(tab: dict, res: dict, one: bool) -> tuple:
 def results_table(tab: dict, res: dict) -> str:
     """The markdown of the table's rows alone, as :func:`format_table` prints it (the
     results page, :mod:`.results_page`, shows it too)."""
-    return md_table(*_rows(tab, res, res.get("seeds") is None))
+    return md_table(*_rows(tab, res, len(res["seeds"]) == 1))
 
 
 # ---------------------------------------------------------------------- findings and notes
@@ -138,7 +138,8 @@ def marks_note(findings: list, budget: str) -> str:
 
     extra = count(True)
     return ("Marks: decided when the Holm-adjusted p of the t test on the seed, recording "
-            "and interaction variance components (Satterthwaite df) is below 0.05; "
+            "and interaction variance components (Satterthwaite df, at most a dominant "
+            "mean square's) is below 0.05; "
             f"Holm's family: this table file's {count(False)} confirmatory comparisons at "
             f"budget {budget}" + (f" (the {extra} exploratory ones: a family of their own)"
                                   if extra else "")
@@ -280,10 +281,10 @@ def protocol_lines(tab: dict, res: dict) -> list:
 
 # ---------------------------------------------------------------------- results.md
 def format_table(tab: dict, res: dict, findings: list) -> str:
-    """Markdown of a table and its ``findings``: one run per row (``res["seeds"]`` None) or
+    """Markdown of a table and its ``findings``: one run per row (one seed) or
     cells ``mean ± std [95 % interval]`` over seeds, with the findings' differences,
     intervals and marks; a smoke budget's table under :data:`SMOKE_BANNER`."""
-    one = res.get("seeds") is None
+    one = len(res["seeds"]) == 1
     header, rows = _rows(tab, res, one)
     machines = ["", machines_note(res.get("results") or {})]
     banner = [SMOKE_BANNER, ""] if res.get("budget") == "smoke" else []
@@ -299,7 +300,7 @@ def format_table(tab: dict, res: dict, findings: list) -> str:
             f"(split {split})", "", *banner,
             "Cells: mean ± std over seeds [95 % interval of the mean over seeds and test "
             "recordings: seed, recording and interaction variance components, "
-            "Satterthwaite df, inside the metric's range]. "
+            "Satterthwaite df at most a dominant mean square's, inside the metric's range]. "
             f"Rule: {tab.get('budget_rule', '').strip()}", "", md_table(header, rows), "",
             md_table(["finding (report)", "ours: difference [95 % interval, seeds and "
                       "recordings] (seeds only)", "P(a beats b)", "report",

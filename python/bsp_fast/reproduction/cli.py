@@ -147,11 +147,10 @@ def _main(ns) -> int:
     from .report import write_report
 
     rows = [r.strip() for r in ns.rows.split(",") if r.strip()] if ns.rows else None
-    seeds = None if ns.seeds == 1 and not ns.split_seeds else ns.seeds
     try:  # SIGTERM/SIGINT: Interrupted here; the runs in worker processes get SIGTERM and
         # save, a run in this process saves at the end of its batch
         with signals():
-            res = run_table(tab, ns.data, ns.budget, ns.out, seeds=seeds,
+            res = run_table(tab, ns.data, ns.budget, ns.out, seeds=ns.seeds,
                             split_seeds=ns.split_seeds, jobs=ns.jobs, rows=rows,
                             overrides=overrides, force=ns.force, quiet=not ns.verbose,
                             dry_run=ns.dry_run, allow_changed=ns.allow_changed,

@@ -109,8 +109,6 @@ def publish(tab: dict, run_folder, results_dir) -> Path:
     for name, r in doc["results"].items():
         r = dict(r, seeds={k: dict(s, run=_rel(s.get("run"), base), per_recording=None)
                            for k, s in r["seeds"].items()})
-        if r.get("run"):
-            r["run"] = _rel(r["run"].replace(" (initial metrics)", ""), base)
         results[name] = r
     budget = doc["budget"]
     stem = f"{tab['table']}-{budget}"

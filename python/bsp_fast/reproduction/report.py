@@ -1,7 +1,7 @@
 """The one report writer of ``bsp-reproduce``: marks the findings of a table's results and
 writes, into the table's run folder, what :mod:`bsp_fast.reporting` renders of them:
 ``results.md`` (the table and its findings, also printed), ``results.json`` (every run's
-values, the summaries, the findings and the figures' paths), ``curves.png`` (with seeds),
+values, the summaries, the findings and the figures' paths), ``curves.png``,
 the table's declared figures and ``--breakdown``'s tables. One run per row: each finding
 shows the direction it went, unmarked (:mod:`.findings`); ``--seeds N``: the findings are
 marked from the two-level intervals and tests, Holm-adjusted, with P(a beats b)
@@ -22,11 +22,12 @@ __all__ = ["format_report", "findings_of", "write_report", "val_series"]
 
 
 def findings_of(tab: dict, res: dict) -> list:
-    """The findings of ``res`` (from :func:`.runner.run_table`): marked from the single
-    runs' values, or (``--seeds``) summarised and marked from intervals."""
-    if res.get("seeds") is None:
-        return mark_exploratory(tab, point_findings(tab, res["results"]))
+    """The findings of ``res`` (from :func:`.runner.run_table`), its rows summarised over
+    their seeds: marked from the values of a table of one seed (no interval to mark
+    from), else from intervals."""
     evidence.summarise(tab, res)
+    if len(res["seeds"]) == 1:
+        return mark_exploratory(tab, point_findings(tab, res["results"]))
     return mark_exploratory(tab, evidence.evaluate_findings(tab, res))
 
 
@@ -65,11 +66,11 @@ def write_report(tab: dict, res: dict, *, breakdown: bool = False, force: bool =
     seeds), the table's figures and, with ``breakdown``, its breakdown tables into
     ``res["dir"]``; returns ``results.md``'s path."""
     found = findings_of(tab, res)
-    series = None if res.get("seeds") is None else val_series(tab, res)
+    series = val_series(tab, res)
     text = format_table(tab, res, found)
     log(text)
     base = Path(res["dir"])
-    curves = None if series is None else learning_curves(tab, res, series)
+    curves = learning_curves(tab, res, series)
     figures = draw_figures(tab, res)  # the table's own figures (``figures:``)
     write_text(base / "results.md", text)
     write_text(base / "results.json", json.dumps(

@@ -1,14 +1,12 @@
-"""The one runner of ``bsp-reproduce``: every row of a table trained with one seed (N = 1:
-the single-run table, runs in ``OUT/TABLE-BUDGET/ROW/``) or N training seeds (weights,
-batch order, noise draws; with ``--split-seeds`` also the recording split; runs in
-``OUT/TABLE-BUDGET/ROW/seed-S/``), the seeds run as parallel processes of one torch thread
-each (one :mod:`.worker` per job slot, kept from run to run), finished runs reused and
-interrupted ones continued; the table's budget rule checked. Both give one result shape
-(:func:`run_table`); the statistics over seeds and recordings are :mod:`.evidence`'s, the
+"""The one runner of ``bsp-reproduce``: every row of a table trained with N training seeds
+(weights, batch order, noise draws; with ``--split-seeds`` also the recording split; runs
+in ``OUT/TABLE-BUDGET/ROW/seed-S/``; N = 1 is a table of one seed, nothing apart), the
+runs as parallel processes of one torch thread each (one :mod:`.worker` per job slot, kept
+from run to run), finished runs reused and interrupted ones continued; the table's budget
+rule checked. One result shape (:func:`run_table`); the statistics over seeds and recordings are :mod:`.evidence`'s, the
 report :mod:`.report`'s. See docs/reproduce.md.
 
-Configs go to ``OUT/TABLE-BUDGET/configs/ROW.yaml`` (one seed) or ``ROW-seed-S.yaml``,
-each usable as ``bsp-train --config``. Every run is recorded under the table file's
+Configs go to ``OUT/TABLE-BUDGET/configs/ROW-seed-S.yaml``, each usable as ``bsp-train --config``. Every run is recorded under the table file's
 protocol hash (:mod:`.protocol`, ``OUT/TABLE-BUDGET/protocol.json``); runs of another hash
 are not mixed in unless ``allow_changed``.
 """
@@ -49,7 +47,7 @@ def add_options(p) -> None:
                    help="train every row with N training seeds (weights, batch order, noise "
                         "draws): cells become mean ± std over seeds with a 95%% interval over "
                         "test recordings, findings are marked by a paired bootstrap "
-                        "(default: 1, the single-run table)")
+                        "(default: 1, a table of one seed, nothing marked)")
     p.add_argument("--split-seeds", action="store_true",
                    help="with --seeds: set the converter's split seed to the seed too (needs "
                         "a dataset directory; it shuffles the clips inside each split, the "
@@ -63,21 +61,19 @@ def row_seeds(row: dict, seeds, budget: str):
     """The seeds ``row`` is trained with: ``seeds``, or its first ``max_seeds[budget]`` (a
     row whose cost per seed the table file gives as the reason)."""
     cap = (row.get("max_seeds") or {}).get(budget)
-    return seeds if seeds is None or cap is None else seeds[:cap]
+    return seeds if cap is None else seeds[:cap]
 
 
 def _plan(tab, data, budget, base: Path, wanted, seeds, split_seeds, overrides, threads,
           convert: bool = True):
-    """``[(row, seed, run_dir, opts)]``; ``seeds`` None: one run per row in ``ROW/`` with
-    the options' own seed (the single-run table)."""
+    """``[(row, seed, run_dir, opts)]``: one run per row and seed in ``ROW/seed-S/``."""
     plan = []
     for row, seed, name in _runs(tab, wanted, seeds, budget):
         extra = dict(overrides or {})
         run_dir = base / name
-        if seed is not None:
-            extra["seed"] = seed
-            if split_seeds:
-                extra["split_seed"] = seed
+        extra["seed"] = seed
+        if split_seeds:
+            extra["split_seed"] = seed
         if threads:
             extra["threads"] = threads
         opts = row_options(tab, row, budget, data, run_dir, extra)
@@ -89,12 +85,12 @@ def _plan(tab, data, budget, base: Path, wanted, seeds, split_seeds, overrides, 
 
 def _runs(tab, wanted, seeds, budget: str):
     """``(row, seed, name)`` of each run of the ``wanted`` rows (an ``initial_of`` row has
-    none): ``name`` is ``ROW`` (one run, seed None) or ``ROW/seed-S``, as the run folders
-    and the protocol ledger name them."""
+    none): ``name`` is ``ROW/seed-S``, as the run folders and the protocol ledger name
+    them."""
     for row in tab["rows"]:
         if row["name"] in wanted and not row.get("initial_of"):
-            for seed in row_seeds(row, seeds, budget) or [None]:
-                yield row, seed, row["name"] if seed is None else f"{row['name']}/seed-{seed}"
+            for seed in row_seeds(row, seeds, budget):
+                yield row, seed, f"{row['name']}/seed-{seed}"
 
 
 def _convert_once(plan) -> None:
@@ -240,8 +236,8 @@ def _run(todo, jobs: int, quiet: bool, log) -> None:
 
 
 def _run_names(tab, wanted, seeds, base: Path, budget: str) -> dict:
-    """``{name: run_dir}`` of the runs of ``wanted`` rows: name ``ROW`` (one seed) or
-    ``ROW/seed-S``, as the protocol ledger records them."""
+    """``{name: run_dir}`` of the runs of ``wanted`` rows: name ``ROW/seed-S``, as the
+    protocol ledger records them."""
     return {name: base / name for _, _, name in _runs(tab, wanted, seeds, budget)}
 
 
@@ -277,7 +273,7 @@ class TablePlan:
     budget: str
     base: Path  # OUT/TABLE-BUDGET
     data: object
-    seeds: list | None  # None: the single-run table (ROW/ folders, the options' seed)
+    seeds: list  # one seed or more, each row's runs in ROW/seed-S
     split_seeds: bool
     jobs: int
     wanted: list
@@ -291,7 +287,7 @@ class TablePlan:
     slow: list = field(default_factory=list)  # rows in bf16 on a CPU
 
 
-def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | None = None,
+def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int = 1,
               split_seeds: bool = False, jobs: int | None = None, rows=None, overrides=None,
               force: bool = False, quiet: bool = True, dry_run: bool = False,
               allow_changed: bool = False, with_published=None, log=print) -> dict:
@@ -306,11 +302,11 @@ def run_table(table, data, budget: str = "quick", out="runs", *, seeds: int | No
     of the table file or other ``overrides`` raises :class:`.protocol.ProtocolChanged`
     unless ``allow_changed`` (then the mix is recorded in ``protocol["mixed"]``).
 
-    ``seeds=None``: one run per row in ``ROW/`` with the table's options' seed, trained in
-    this process (the single-run table; ``res["seeds"]`` is None and each row also carries
-    its one run's ``metrics``, ``initial``, ``epochs``, ``best_epoch``, ``seconds`` and
-    ``run``). ``seeds=N``: N training seeds per row in ``ROW/seed-S/``, ``jobs`` processes
-    at once (one torch thread each when ``jobs`` > 1); the statistics are
+    ``seeds=N``: N training seeds per row (the default seed and the N - 1 after it) in
+    ``ROW/seed-S/``; one seed is a table of one seed, the same result shape (its findings
+    read from the one run's values, :func:`.report.findings_of`). ``jobs`` processes at
+    once (default: one for one seed, else the cores; one torch thread each when ``jobs``
+    > 1); the statistics are
     :func:`.evidence.summarise`'s.
 
     ``with_published=DIR`` (with seeds): the runs of the wanted rows with no run here are
@@ -339,24 +335,23 @@ def _check_call(budget: str, seed_values, jobs, split_seeds: bool, data) -> int:
     """The call's arguments checked; returns the processes to train with."""
     if budget not in BUDGETS:
         raise ValueError(f"budget must be one of {list(BUDGETS)}, got {budget!r}")
-    jobs = 1 if seed_values is None else ((os.cpu_count() or 1) if jobs is None else jobs)
+    if jobs is None:  # one seed: one process, its torch threads on every core
+        jobs = 1 if len(seed_values) == 1 else (os.cpu_count() or 1)
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
-    if split_seeds and seed_values is None:
-        raise ValueError("--split-seeds varies the split with the seeds: give seeds")
     if split_seeds and Path(data).suffix in (".h5", ".hdf5"):
         raise ValueError("--split-seeds needs a dataset directory: an HDF5 file holds one "
                          "split")
     return jobs
 
 
-def plan_table(table, data, budget: str, out, *, seeds=None, split_seeds=False, jobs=None,
+def plan_table(table, data, budget: str, out, *, seeds=1, split_seeds=False, jobs=None,
                rows=None, overrides=None, force=False, dry_run=False, allow_changed=False,
                with_published=None, log=print) -> TablePlan:
     """The :class:`TablePlan` of a call of :func:`run_table`; writes each run's config
     file (``bsp-train --config``), nothing else."""
     tab = table if isinstance(table, dict) else load_table(table)
-    seed_values = None if seeds is None else seed_list(seeds)
+    seed_values = seed_list(seeds)
     jobs = _check_call(budget, seed_values, jobs, split_seeds, data)
     wanted = wanted_rows(tab, rows or _not_moved(tab, budget, log))
     base = Path(out) / f"{tab['table']}-{budget}"
@@ -365,9 +360,6 @@ def plan_table(table, data, budget: str, out, *, seeds=None, split_seeds=False, 
             if not force and ((d / "metrics.json").is_file() or resumable(d) is not None)]
     restored = {}
     if with_published is not None:
-        if seed_values is None:
-            raise ValueError("--with-published reads the seeds of a published table: give "
-                             "--seeds")
         restored = restorable(tab, budget, with_published, data, split_seeds,
                               [n for n in names if n not in kept and not force])
     protocol, ledger = guard(base, tab, budget, [*kept, *restored], overrides,
@@ -400,12 +392,10 @@ def _decide(plan: TablePlan, run, force: bool, dry_run: bool, log) -> None:
 
     row, seed, run_dir, opts = run
     run_name = str(run_dir.relative_to(plan.base))  # as the ledger and `restored` name it
-    label = row["name"] if seed is None else f"{row['name']} seed {seed}"
-    name = row["name"] if seed is None else f"{row['name']}-seed-{seed}"
-    cfg_path = plan.base / "configs" / f"{name}.yaml"
+    label = f"{row['name']} seed {seed}"
+    cfg_path = plan.base / "configs" / f"{row['name']}-seed-{seed}.yaml"
     cfg_path.parent.mkdir(parents=True, exist_ok=True)
-    what = "one row" if seed is None else "one row and seed"
-    write_text(cfg_path, f"# bsp-reproduce: {what}, usable as bsp-train --config\n"
+    write_text(cfg_path, "# bsp-reproduce: one row and seed, usable as bsp-train --config\n"
                + yaml.safe_dump(opts, sort_keys=False))
     if dry_run:
         log(f"bsp-train --config {cfg_path}")
@@ -453,12 +443,9 @@ def collect_table(plan: TablePlan, force: bool, quiet: bool, log) -> dict:
             r["seeds"][str(seed)] = one = back[0]
             published_cost.setdefault(row["name"], back[2])
         else:
-            r["seeds"][str(SEED if seed is None else seed)] = one = _seed_result(run_dir)
+            r["seeds"][str(seed)] = one = _seed_result(run_dir)
             one["metrics"].update(noisy_box_metrics(plan.tab, run_dir, force, quiet, log))
         r["noise"], r["mjp"] = one["noise"], one["mjp"]
-        if seed is None:  # the single run's own numbers, as the one-run report reads them
-            r.update({k: one[k] for k in ("metrics", "initial", "baseline", "epochs",
-                                          "best_epoch", "seconds", "run")})
     for name, r in results.items():  # parameters and FLOPs of the row's model, its first run
         first = next(iter(r["seeds"].values()))["run"]
         r["cost"] = run_cost(first) if first else published_cost.get(name, {})
@@ -472,9 +459,6 @@ def _initial_rows(plan: TablePlan, results: dict) -> None:
         src = row.get("initial_of")
         if row["name"] in plan.wanted and src and src in results:
             r = results[row["name"]] = dict(results[src], source="initial", run_of=src)
-            if plan.seeds is None:
-                r.update(metrics=dict(r["initial"]), epochs=None, best_epoch=None,
-                         seconds={}, run=r["run"] + " (initial metrics)")
             r["cost"] = {}  # no model of its own
 
 

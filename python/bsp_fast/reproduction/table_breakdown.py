@@ -28,11 +28,10 @@ MD, JSON = "breakdown.md", "breakdown.json"
 
 def run_dirs(res: dict) -> list:
     """``[(row, seed or None, run_dir)]`` of bsp-reproduce's results (:func:`.runner.run_table`:
-    every row holds its runs under ``seeds``; the seed is None for the single-run table);
+    every row holds its runs under ``seeds``);
     rows that read another row's trivial baseline have no run of their own, nor runs read
     from a published table (.restore: their checkpoints are on another machine)."""
-    single = res.get("seeds") is None
-    return [(name, None if single else seed, Path(one["run"]))
+    return [(name, seed, Path(one["run"]))
             for name, r in res["results"].items() if r.get("source") != "initial"
             for seed, one in r["seeds"].items() if one["run"]]
 
@@ -53,7 +52,7 @@ def run_breakdowns(res: dict, force: bool = False, log=print) -> dict:
     for name, seed, run_dir in run_dirs(res):
         path = run_dir / FILE
         if force or not _fresh(run_dir, path):
-            log(f"[{name}{'' if seed is None else f' seed {seed}'}] breakdown of {run_dir}")
+            log(f"[{name} seed {seed}] breakdown of {run_dir}")
             breakdown(str(run_dir), save=True)
         docs.setdefault(name, []).append(json.loads(path.read_text()))
     return docs
@@ -135,7 +134,7 @@ def table_breakdown(tab: dict, res: dict, force: bool = False, log=print) -> lis
     labels = {r["name"]: r.get("label", r["name"]) for r in tab["rows"] if r["name"] in docs}
     if len(set(labels.values())) < len(labels):  # e.g. an ablation grid: names tell rows apart
         labels = {name: name for name in labels}
-    n_seeds = len(res.get("seeds") or [1])
+    n_seeds = len(res["seeds"])
     base = Path(res["dir"])
     write_text(base / MD, format_aggregate(agg, labels, n_seeds,
                                            table_heading(tab["title"], res["budget"]),
