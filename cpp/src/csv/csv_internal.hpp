@@ -211,7 +211,13 @@ inline unsigned append_fraction(const char* f, unsigned int_digits, std::uint64_
   const double d = static_cast<double>(w) / kPow10Exact[kf];
   const float v = static_cast<float>(d * (1 + 0x1p-50));
   if (static_cast<float>(d * (1 - 0x1p-50)) != v) return parse_float_generic(p, end, out);
-  out = *p == '-' ? -v : v;
+  // The sign without a branch: a random sign mispredicts half the time, ~1/6 of the time
+  // of a number (callgrind --branch-sim on the benchmark's pose cells). v >= 0 here, so -v
+  // is v with its sign bit set, bit for bit (-0.0 too).
+  std::uint32_t bits;
+  std::memcpy(&bits, &v, sizeof bits);
+  bits |= static_cast<std::uint32_t>(*p == '-') << 31;
+  std::memcpy(&out, &bits, sizeof bits);
   p = stop;
   return true;
 #else
