@@ -178,8 +178,12 @@ inline unsigned append_fraction(const char* f, unsigned int_digits, std::uint64_
     const std::uint64_t v = load8(f + total);
     const unsigned k = digit_run(v);
     if (int_digits + total + k > 19) return 0;  // w would overflow
-    if (k < 8) {
-      if (k) w = w * kPow10[k] + digits_value(v, k);
+    if (k < 8) {  // the last chunk; k = 0 too, without a branch (two shifts of 32)
+      static constexpr std::uint64_t kPad[8] = {  // '0' in the bytes the shift empties
+          0x3030303030303030ull, 0x30303030303030ull, 0x303030303030ull, 0x3030303030ull,
+          0x30303030ull, 0x303030ull, 0x3030ull, 0x30ull};
+      const unsigned half = 4 * (8 - k);
+      w = w * kPow10[k] + eight_digits(((v << half) << half) | kPad[k]);
       return total + k;
     }
     w = w * 100000000ull + eight_digits(v);
