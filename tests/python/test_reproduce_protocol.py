@@ -271,6 +271,26 @@ def test_deviations_appended_later_keep_the_hash_and_are_printed(finished, tmp_p
     assert "Deviations from the registered protocol:" in saved
 
 
+def test_a_test_set_is_recorded_by_its_folder_not_the_machines_path(tmp_path):
+    """A run recorded with --set test_data=/a/path continues (and is published) under the
+    folder's name: the same registered test set on another disk is the same protocol."""
+    tab = R.load_table("lifting")
+    base = tmp_path / "lifting-quick"
+    base.mkdir()
+    old = {"hash": P.table_hash(tab["path"]), "options": {"test_data": "/tmp/x/medium-t1"},
+           "code": {}, "utc": "2026-11-29T00:00:00Z"}
+    (base / P.LEDGER).write_text(json.dumps({"runs": {"lstm/seed-1": old}}))
+    prot, _ = P.guard(base, tab, "quick", ["lstm/seed-1"], {"test_data": "/other/medium-t1"})
+    assert prot["options"] == {"test_data": "medium-t1"} and prot["mixed"] == {}
+    with pytest.raises(P.ProtocolChanged):
+        P.guard(base, tab, "quick", ["lstm/seed-1"], {"test_data": "/tmp/x/medium-t2"})
+    published = RM._portable_protocol(dict(prot, table_file=str(tab["path"]),
+                                           runs={"lstm/seed-1": old}))
+    assert (published["options"], published["runs"]["lstm/seed-1"]["options"],
+            published["table_file"]) == ({"test_data": "medium-t1"},
+                                         {"test_data": "medium-t1"}, "lifting.yaml")
+
+
 def test_a_changed_table_refuses_to_mix_unless_allowed(finished, tmp_path):
     base, old = finished["base"], P.table_hash(finished["table"])
     doc = _tiny_doc()

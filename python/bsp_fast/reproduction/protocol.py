@@ -50,6 +50,10 @@ UNHASHED = ("deviations", "power")
 LEDGER = "protocol.json"
 #: command-line options that change how a run executes, not what it computes
 EXECUTION_KEYS = ("workers", "threads")
+#: options naming a dataset by its path: recorded by its folder's name, as ``--data`` is
+#: published (a machine's path is no part of a protocol; a registered test set is what it
+#: is by test_sets' check, whichever disk holds it)
+PATH_KEYS = ("test_data",)
 #: ``{key: required}`` of a deviation entry
 DEVIATION_KEYS = {"what": True, "when": True, "commit": True, "why": True,
                   "seen_test_numbers": True, "seen_in": False}
@@ -190,7 +194,14 @@ def _read_ledger(base: Path, tab: dict, budget: str) -> dict:
 def _options(overrides) -> dict:
     """The given options that change what a run computes, as JSON values."""
     given = {k: v for k, v in (overrides or {}).items() if k not in EXECUTION_KEYS}
-    return json.loads(json.dumps(given, sort_keys=True, default=str))
+    return portable_options(json.loads(json.dumps(given, sort_keys=True, default=str)))
+
+
+def portable_options(options: dict) -> dict:
+    """``options`` with each :data:`PATH_KEYS` value a folder's name (also applied to
+    what a ledger recorded before, so runs recorded with a path compare equal)."""
+    return {k: Path(v).name if k in PATH_KEYS and isinstance(v, str) else v
+            for k, v in options.items()}
 
 
 def guard(base, tab: dict, budget: str, runs, overrides=None, *,
@@ -212,7 +223,8 @@ def guard(base, tab: dict, budget: str, runs, overrides=None, *,
     mixed = {}
     for name in runs:
         old = ledger["runs"].get(name) or {}
-        if (old.get("hash"), old.get("options", {})) != (now["hash"], now["options"]):
+        recorded = portable_options(old.get("options", {}))
+        if (old.get("hash"), recorded) != (now["hash"], now["options"]):
             mixed[name] = {"hash": old.get("hash"), "options": old.get("options", {})}
     if mixed and not allow_changed:
         shown = ", ".join(list(mixed)[:6]) + (", ..." if len(mixed) > 6 else "")

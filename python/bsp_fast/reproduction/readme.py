@@ -26,7 +26,7 @@ from pathlib import Path
 
 from ..atomic import write_text
 from ..reporting.results_page import section_text
-from .protocol import table_hash
+from .protocol import portable_options, table_hash
 from .table_files import load_table
 
 __all__ = ["FORMAT", "MARKER", "PAGE", "default_page", "published_path", "publish",
@@ -92,6 +92,15 @@ def _per_recording(tab: dict, doc: dict) -> dict:
     return out
 
 
+def _portable_protocol(protocol: dict) -> dict:
+    """The protocol record without a machine's paths: the table file's and the datasets'
+    names (:func:`.protocol.portable_options`)."""
+    runs = {n: dict(r, options=portable_options(r.get("options") or {})) if isinstance(r, dict)
+            else r for n, r in (protocol.get("runs") or {}).items()}
+    return dict(protocol, table_file=Path(protocol["table_file"]).name,
+                options=portable_options(protocol.get("options") or {}), runs=runs)
+
+
 def publish(tab: dict, run_folder, results_dir) -> Path:
     """Copies the finished table of ``run_folder`` (``OUT/TABLE-BUDGET``: its results.json,
     results.md and the runs' per-recording sums) into ``results_dir``; returns the JSON's
@@ -115,7 +124,7 @@ def publish(tab: dict, run_folder, results_dir) -> Path:
     data = doc.get("data")
     if data and Path(data).is_absolute():  # a machine's path: the folder's name only
         data = Path(data).name
-    protocol = dict(doc["protocol"], table_file=Path(doc["protocol"]["table_file"]).name)
+    protocol = _portable_protocol(doc["protocol"])
     sums = _per_recording(tab, doc)
     out = {"format": FORMAT, "table": tab["table"], "budget": budget, "title": tab["title"],
            "task": tab["task"], "metrics": tab["metrics"],
