@@ -198,6 +198,19 @@ void merge_strings(const std::vector<std::unique_ptr<Block>>& blocks,
 
 // ---------------------------------------------------------------- one pass (scan_parse_rows)
 
+// Reserves t's selected columns for t.rows rows.
+void reserve_rows(PoseTable& t, const std::vector<int>& cols) {
+  for (const int c : cols) {
+    if (c < 0) continue;
+    const PoseColumn r = pose_column(t, static_cast<std::size_t>(c));
+    if (r.floats) r.floats->reserve(t.rows * r.spec->numbers());
+    if (r.ints) r.ints->reserve(t.rows);
+    if (r.bools) r.bools->reserve(t.rows), r.valid->reserve(t.rows);
+    if (r.strings) r.strings->codes.reserve(t.rows);
+  }
+}
+
+
 // One byte range [lo, hi) of the file read once: its CRC-32, its newlines, and the rows of
 // the lines that end in it, parsed into a table of its own as the buffers are read. The
 // line ending at the range's first newline began in an earlier range; it is parsed once
@@ -267,6 +280,7 @@ void scan_part(const InputFile& file, const std::vector<int>& cols, int dicts, P
   std::unique_ptr<char[]> buf(new char[kScanBytes]);
   std::vector<char> spill;
   std::vector<std::size_t> nl;
+  bool reserved = false;
   part.rows.dicts.resize(static_cast<std::size_t>(dicts));
   part.first.dicts.resize(static_cast<std::size_t>(dicts));
   for (std::size_t a = part.lo; a < part.hi; a += kScanBytes) {
@@ -279,6 +293,14 @@ void scan_part(const InputFile& file, const std::vector<int>& cols, int dicts, P
                                     p, '\n', static_cast<std::size_t>(data + n - p))));
          ++p)
       nl.push_back(a + static_cast<std::size_t>(p - data));
+    if (!reserved && !nl.empty()) {  // the range's rows, as dense as in its first buffer
+      const std::size_t rows = nl.size() * ((part.hi - part.lo) / n + 1) * 9 / 8 + 16;
+      part.table.rows = rows;
+      reserve_rows(part.table, cols);  // no copy of the table as it grows
+      part.begin.reserve(rows), part.end.reserve(rows), part.nl_index.reserve(rows);
+      part.skip.reserve(rows);
+      reserved = true;
+    }
     const std::size_t before = part.parsed();
     if (!take_lines(file, part, cols, a, data, nl, spill)) {
       part.stopped = true;
@@ -334,18 +356,6 @@ void append_rows(PoseTable& src, std::size_t from, std::size_t n, PoseTable& t,
         break;
       case CsvKind::string: append(b.strings->codes, a.strings->codes, 1); break;
     }
-  }
-}
-
-// Reserves t's selected columns for t.rows rows.
-void reserve_rows(PoseTable& t, const std::vector<int>& cols) {
-  for (const int c : cols) {
-    if (c < 0) continue;
-    const PoseColumn r = pose_column(t, static_cast<std::size_t>(c));
-    if (r.floats) r.floats->reserve(t.rows * r.spec->numbers());
-    if (r.ints) r.ints->reserve(t.rows);
-    if (r.bools) r.bools->reserve(t.rows), r.valid->reserve(t.rows);
-    if (r.strings) r.strings->codes.reserve(t.rows);
   }
 }
 
