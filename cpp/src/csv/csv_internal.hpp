@@ -234,10 +234,15 @@ inline bool scan_numbers(const char*& p, const char* end, float* out, int n) {
   if (p == end || *p != '[') return false;
   ++p;
   for (int i = 0; i < n; ++i) {
-    p = skip_spaces(p, end);
+    if (p < end && *p == ' ') p = skip_spaces(p + 1, end);
     if (!parse_float(p, end, out[i])) return false;
+    const char sep = i + 1 < n ? ',' : ']';
+    if (p < end && *p == sep) {  // as Python writes lists: no space before the separator
+      ++p;
+      continue;
+    }
     p = skip_spaces(p, end);
-    if (p == end || *p != (i + 1 < n ? ',' : ']')) return false;
+    if (p == end || *p != sep) return false;
     ++p;
   }
   return true;
