@@ -4,7 +4,10 @@
 // row-major arrays, strings dictionary-encoded. Reading scans the file once in parallel for
 // the row boundaries (quoted cells hold commas but never newlines) and its CRC-32, then
 // parses row blocks in parallel straight into the preallocated columns, each thread
-// reading its rows a buffer at a time; the result is identical for any thread count. Writing reproduces pandas `DataFrame.to_csv(index=False)` byte for byte.
+// reading its rows a buffer at a time; the result is identical for any thread count. With
+// deferred columns (CsvReadOptions::deferred) both happen in one pass: each thread parses
+// the rows of its byte range from the buffers it scans, and the parts are joined in order.
+// Writing reproduces pandas `DataFrame.to_csv(index=False)` byte for byte.
 #pragma once
 #include <array>
 #include <atomic>
