@@ -27,6 +27,7 @@ def _without(modules, code: str, cwd=ROOT) -> subprocess.CompletedProcess:
 
 
 def test_bsp_preview_without_the_preview_extra_names_it(tmp_path):
+    (tmp_path / "c.h5").write_bytes(b"")  # an input that exists: the extra is said first
     r = _without(["cv2"], "from bsp_fast.__main__ import main\n"
                  f"sys.exit(main(['preview', 'clips', {str(tmp_path / 'c.h5')!r}, "
                  f"'--out', {str(tmp_path / 'x.png')!r}]))")
