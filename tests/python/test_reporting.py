@@ -75,3 +75,15 @@ def test_initial_text_is_one_line_per_split_without_the_fallback_at_zero():
     assert initial_text(initial).splitlines() == [
         "initial metrics (identity, before training):", "  val: mpjpe_mm 80.12",
         "  test: mpjpe_mm 81"]
+
+
+def test_a_tables_load_is_said_from_its_runs_or_said_missing():
+    from bsp_fast.reporting.results_page import _load_sentence
+
+    runs = [("a", {"seconds": {"fit": 60.0, "load": [1.5, 3.25]}}),
+            ("b", {"seconds": {"fit": 60.0, "load": [0.7, 2.0]}}),
+            ("b", {"seconds": {"fit": 60.0}})]
+    assert _load_sentence(runs) == ("Load (1-min average at each run's fit start and end): "
+                                    "0.7-3.2; not recorded for 1 of 3 runs.")
+    assert _load_sentence(runs[:2]).endswith(": 0.7-3.2.")
+    assert _load_sentence(runs[2:]).startswith("Load: not recorded")

@@ -288,6 +288,7 @@ def test_smoke_run_prints_table_and_consistent_marks(table, data, tmp_path, caps
             assert float(cells[-2].replace(",", "")) > 0
             seconds = json.loads((run / "metrics.json").read_text())["seconds"]
             assert cells[-1] == f"{seconds['fit'] / 60:.1f}; {seconds['fit_cpu'] / 60:.1f}"
+            assert len(seconds["load"]) == 2 and min(seconds["load"]) >= 0  # fit start, end
     # one run per row: each finding's direction from the numbers, no marks (status
     # inconclusive by rule, n/a where a row did not run)
     marks = {f["text"]: f["direction"] for f in saved["findings"]}

@@ -71,14 +71,30 @@ def _runs_sentences(doc: dict, runs: list) -> list:
     out = [f"Best epoch = last epoch (still improving when training stopped) in "
            f"{sum(at_end.values())} of {len(runs)} runs" + (f" ({rows})" if rows else "") + "."]
     cpu = [s["seconds"].get("fit_cpu") for _, s in runs if s.get("seconds")]
+    wall = [s["seconds"].get("fit") for _, s in runs if s.get("seconds")]
     partial = sum(bool(s.get("seconds", {}).get("partial")) for _, s in runs)
     if cpu and all(c is not None for c in cpu):
-        out.append(f"Training took {'at least ' * bool(partial)}{sum(cpu) / 60:.1f} CPU "
-                   f"minutes over {len(runs)} run{'s' * (len(runs) != 1)} (fit only, "
+        spent = f"{sum(cpu) / 60:.1f} CPU minutes" + (
+            f" ({sum(wall) / 60:.1f} min of wall time, summed)"
+            if wall and all(w is not None for w in wall) else "")
+        out.append(f"Training took {'at least ' * bool(partial)}{spent} "
+                   f"over {len(runs)} run{'s' * (len(runs) != 1)} (fit only, "
                    "`metrics.json`" + (f"; {partial} of them resumed before fit time was "
                                        "carried over resumes, counted for their last "
                                        "process only" if partial else "") + ").")
-    return out + [machines_note(doc["results"])]
+    return out + [machines_note(doc["results"]), _load_sentence(runs)]
+
+
+def _load_sentence(runs: list) -> str:
+    """The machine's load the runs' wall times were measured under (each run's 1-min load
+    average at its fit's start and end, ``metrics.json``), or that it was not recorded."""
+    loads = [x for _, s in runs for x in (s.get("seconds") or {}).get("load") or []]
+    missing = sum(not (s.get("seconds") or {}).get("load") for _, s in runs)
+    if not loads:
+        return "Load: not recorded (runs made before bsp-train recorded it, 2026-11-29)."
+    return (f"Load (1-min average at each run's fit start and end): {min(loads):.1f}-"
+            f"{max(loads):.1f}" + (f"; not recorded for {missing} of {len(runs)} runs"
+                                   if missing else "") + ".")
 
 
 def _sentences(doc: dict) -> list:

@@ -293,11 +293,15 @@ class _Job:
         from .stopping import Interrupted
 
         life.start_clock()
+        load = os.getloadavg()[0]
         trainer.fit(self.module, datamodule=self.dm, ckpt_path=ckpt_path, weights_only=True)
         if self.sig.received is not None:  # during the last validation: stop before testing
             raise Interrupted(self.sig.received)
         # wall and CPU (this process's threads), over every process of a resumed run
         seconds["fit"], seconds["fit_cpu"] = life.fit_seconds()
+        # the machine's 1-min load average at fit start and end (this process's last fit):
+        # what the wall seconds were measured under
+        seconds["load"] = [round(load, 2), round(os.getloadavg()[0], 2)]
         seconds.update({"partial": True} if life.partial else {"carried": True})
         write_marker(self.tmp, **self.life_marker, state="running",
                      fit_done=trainer.current_epoch, epoch=trainer.current_epoch,
