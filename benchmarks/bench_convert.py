@@ -39,6 +39,15 @@ import bench_csv  # noqa: E402  (the shared row generator and the Python alterna
 import bsp_fast as bf  # noqa: E402
 
 
+def _where(pkg: Path) -> str:
+    """Which bsp_fast ran, without this machine's paths: the source tree's (relative to the
+    repository) or an installed copy."""
+    root = Path(__file__).resolve().parent.parent
+    try:
+        return f"from {pkg.resolve().relative_to(root)}"
+    except ValueError:
+        return "installed (site-packages)"
+
 def write_dataset(root: Path, rows: int, seed: int = 0) -> Path:
     root.mkdir(parents=True, exist_ok=True)
     cols = bench_csv.make_columns(rows, seed=seed)
@@ -150,7 +159,7 @@ def convert_table(tmp: Path, args, runs) -> int:
     print(f"\nWhole conversion of {args.rows:,} rows ({size:.2f} GB data.csv, "
           f"{f'generated in {t:.0f} s' if t else 'reused'}), defaults (L = 30), 2 threads, "
           f"{'over the previous output' if args.replace else 'into a new file'}, "
-          f"bsp_fast from {Path(bf.__file__).parent}, load {os.getloadavg()[0]:.2f}:\n")
+          f"bsp_fast {_where(Path(bf.__file__).parent)}, load {os.getloadavg()[0]:.2f}:\n")
     # CPU s: user + system time of the child, all threads (less sensitive than the wall
     # time to other work on the machine, though not immune: caches and memory are shared).
     # wc -l and read_csv of the same file just before each conversion: the page cache and
