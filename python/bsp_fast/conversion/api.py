@@ -146,50 +146,14 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
             crop_size=CONVERT["crop_size"], skip_bad_media=False, force=False,
             progress=None, strict=False, client=None, shards=None,
             crop_box=CONVERT["crop_box"], crop_context=CONVERT["crop_context"]) -> dict:
-    """Converts a CARLA-BSP dataset into train/val/test clips in one HDF5 file.
-
-    ``dataset`` is the dataset directory (or its data.csv). ``clip_length`` defaults to 30
-    (16 with ``benchmark``), ``clip_offset`` to the clip length (6 with ``benchmark``),
-    ``eval_clip_offset`` to ``clip_offset``. ``label`` is ``'last'`` (is_crossing of the
-    last frame) or ``'any:F'`` (any of the last ceil(L*F) frames). ``benchmark`` selects the
-    time-to-event windows with video-level labels (it does not balance: add ``balance``).
-    The split is by recording: ``test_frac`` of all clips go to test, then ``val_frac`` of
-    the clips that remain go to validation (each at least one clip, whole recordings), so
-    the defaults give about 20 % test and 16 % validation clips. ``fov`` defaults to the
-    dataset's config.yaml, else 90 degrees. The output is written under a temporary name
-    and renamed when complete; an existing ``out_path`` is kept unless ``force``.
-
-    ``media`` (default: on, unless the dataset's config.yaml says ``poses_only: true``)
-    decodes each recording's MP4 and segmentation APNG once and
-    stores ``crop_size`` x ``crop_size`` pedestrian crops (RGB and class tags), mask
-    statistics and joint visibility of every frame the clips use. A missing or broken media
-    file fails the conversion naming the file, unless ``skip_bad_media``: then its
-    recording is left out (the split is planned without it) and listed in
-    ``report["media"]["bad"]``. Media paths in data.csv that are absolute or leave the
-    dataset root (``..``) are refused before anything is opened. ``compress`` deflates the
-    large pose targets and the RGB crops (about 2.5x smaller, much slower random reads).
-    ``crop_box`` says what the crop box is made from: ``"mask"`` (default: the
-    segmentation mask's box, what a detector could see; a frame without a pedestrian pixel
-    gets no crop and is counted as fully occluded, ``report["media"]["fully_occluded"]``),
-    ``"mask+joints"`` (the union with the ground-truth joint box, an upper bound) or
-    ``"joints"``. ``crop_context`` > 1 also stores a wider crop (``frames/context_rgb``)
-    from which box noise is cut (docs/hdf5-schema.md).
-
-    ``progress`` (default: when stderr is a terminal) shows a bar per stage. An empty split
-    or a split with a single class is listed in ``report["warnings"]`` and warned about
-    (``UserWarning``); ``strict`` raises :class:`UnusableConversion` instead and writes
-    nothing.
-
-    Returns the report: rows, recordings, clips per split and class, skipped recordings
-    and why, seconds per stage, ``media`` (frames per split, seconds, crops_per_second,
-    bad files and why), ``warnings``, ``settings`` and, with ``verify``, the verification
-    table.
-
-    ``client`` (a ``distributed.Client``) converts on a Dask cluster instead: ``shards``
-    tasks (default: one per worker), each writing part of the output into the folder
-    ``<out_path>.shards``, and ``out_path`` made of HDF5 virtual datasets over them, equal
-    value for value to the one-process output (docs/distributed.md).
-    """
+    """Converts a CARLA-BSP dataset (its directory or its data.csv) into train/val/test
+    clips in one HDF5 file, written under a temporary name and renamed when complete (an
+    existing ``out_path`` is kept unless ``force``); returns the report: rows, recordings,
+    clips per split and class, skipped recordings and why, seconds per stage, ``media``,
+    ``warnings``, ``settings`` and, with ``verify``, the verification table. The keywords
+    are bsp-convert's options; what each does and its default: docs/convert.md, "The
+    keywords of bsp_fast.convert". ``client`` (a ``distributed.Client``) converts on a
+    Dask cluster instead, in ``shards`` tasks (docs/distributed.md)."""
     root, csv = dataset_csv(dataset)
     out = Path(out_path)
     refuse_inputs_as_output(root, csv, out)
@@ -205,33 +169,40 @@ def convert(dataset, out_path, *, clip_length=None, clip_offset=None, eval_clip_
     _positive("shards", shards)
     if shards is not None and client is None:
         raise ValueError("shards needs a client (a Dask cluster to run them on)")
-    if progress is None:
-        progress = _is_terminal(sys.stderr)
     options = _core_options(settings, root, eval_clip_offset=eval_clip_offset,
                             min_video_length=min_video_length, label=label,
                             val_frac=val_frac, test_frac=test_frac, threads=threads,
                             verify=verify, crop_size=crop_size, skip_bad_media=skip_bad_media,
                             crop_box=crop_box, crop_context=crop_context)
-    why_none = None if settings["media"] else (
-        "the dataset's config.yaml says poses_only: true" if media is None else "media=False")
     out.parent.mkdir(parents=True, exist_ok=True)
+    report = _write(csv, root, out, options, client=client, shards=shards, strict=strict,
+                    force=force, progress=_is_terminal(sys.stderr) if progress is None
+                    else progress)
+    report["settings"] = settings
+    report["media"]["why_none"] = None if settings["media"] else (
+        "the dataset's config.yaml says poses_only: true" if media is None else "media=False")
+    for w in report["warnings"]:
+        warnings.warn(f"bsp_fast.convert: {w} ({out})", UserWarning, stacklevel=2)
+    return report
+
+
+def _write(csv, root, out: Path, options: dict, *, client, shards, strict, force,
+           progress) -> dict:
+    """The conversion itself: on the Dask cluster of ``client``, or in this process into a
+    temporary file renamed when complete (``strict``: nothing written for an unusable
+    conversion); the report, its ``warnings`` said."""
     if client is not None:
         from .sharded import convert_sharded
 
-        report = convert_sharded(str(csv), out, options, client, shards=shards, strict=strict,
-                                 root=root, force=force)
-    else:
-        with atomic_output(out, force=force) as tmp:
-            report = _run(str(csv), str(tmp), options, progress)
-            report["warnings"] = _report.problems(report)
-            if strict and report["warnings"]:
-                raise UnusableConversion(f"{root}: unusable conversion (strict): "
-                                         + "; ".join(report["warnings"]) + "; nothing written")
-        report["output"] = str(out)
-    report["settings"] = settings
-    report["media"]["why_none"] = why_none
-    for w in report["warnings"]:
-        warnings.warn(f"bsp_fast.convert: {w} ({out})", UserWarning, stacklevel=2)
+        return convert_sharded(str(csv), out, options, client, shards=shards, strict=strict,
+                               root=root, force=force)
+    with atomic_output(out, force=force) as tmp:
+        report = _run(str(csv), str(tmp), options, progress)
+        report["warnings"] = _report.problems(report)
+        if strict and report["warnings"]:
+            raise UnusableConversion(f"{root}: unusable conversion (strict): "
+                                     + "; ".join(report["warnings"]) + "; nothing written")
+    report["output"] = str(out)
     return report
 
 
