@@ -62,8 +62,8 @@ def val_series(tab: dict, res: dict) -> dict:
 
 def write_report(tab: dict, res: dict, *, breakdown: bool = False, force: bool = False,
                  log=print) -> Path:
-    """Prints the table and writes ``results.md``, ``results.json``, ``curves.png`` (with
-    seeds), the table's figures and, with ``breakdown``, its breakdown tables into
+    """Prints the table and writes ``results.md``, ``results.json``, ``curves.png``, the
+    table's figures and, with ``breakdown``, its breakdown tables into
     ``res["dir"]``; returns ``results.md``'s path."""
     found = findings_of(tab, res)
     series = val_series(tab, res)

@@ -3,12 +3,13 @@
 in ``OUT/TABLE-BUDGET/ROW/seed-S/``; N = 1 is a table of one seed, nothing apart), the
 runs as parallel processes of one torch thread each (one :mod:`.worker` per job slot, kept
 from run to run), finished runs reused and interrupted ones continued; the table's budget
-rule checked. One result shape (:func:`run_table`); the statistics over seeds and recordings are :mod:`.evidence`'s, the
-report :mod:`.report`'s. See docs/reproduce.md.
+rule checked. One result shape (:func:`run_table`); the statistics over seeds and
+recordings are :mod:`.evidence`'s, the report :mod:`.report`'s. See docs/reproduce.md.
 
-Configs go to ``OUT/TABLE-BUDGET/configs/ROW-seed-S.yaml``, each usable as ``bsp-train --config``. Every run is recorded under the table file's
-protocol hash (:mod:`.protocol`, ``OUT/TABLE-BUDGET/protocol.json``); runs of another hash
-are not mixed in unless ``allow_changed``.
+Configs go to ``OUT/TABLE-BUDGET/configs/ROW-seed-S.yaml``, each usable as ``bsp-train
+--config``. Every run is recorded under the table file's protocol hash (:mod:`.protocol`,
+``OUT/TABLE-BUDGET/protocol.json``); runs of another hash are not mixed in unless
+``allow_changed``.
 """
 from __future__ import annotations
 
@@ -46,7 +47,8 @@ def add_options(p) -> None:
     p.add_argument("--seeds", type=int, default=1, metavar="N",
                    help="train every row with N training seeds (weights, batch order, noise "
                         "draws): cells become mean ± std over seeds with a 95%% interval over "
-                        "test recordings, findings are marked by a paired bootstrap "
+                        "test recordings, findings marked from the seed and recording variance "
+                        "components' t test "
                         "(default: 1, a table of one seed, nothing marked)")
     p.add_argument("--split-seeds", action="store_true",
                    help="with --seeds: set the converter's split seed to the seed too (needs "
