@@ -400,7 +400,8 @@ def _finding(tab, f, c: dict) -> dict:
 def evaluate_findings(tab: dict, res: dict) -> list:
     """``[{"text", "ours", "report", "status", "rule", "difference", "interval",
     "interval_seeds", "recordings", "seeds", "p", "p_holm", "p_improvement", ("size")}]``:
-    each finding marked from the two-level bootstrap (``res`` from :func:`summarise`):
+    each finding marked from the two-level t test on the variance components of seeds and
+    test recordings (:data:`METHOD`; ``res`` from :func:`summarise`):
     decided when its Holm-adjusted p is below 0.05 and no rule (:func:`~U.rule`) makes it
     inconclusive. Holm's family: every comparison of the table's confirmatory findings
     (:func:`.protocol.confirmatory`); the exploratory ones form a family of their own. The
