@@ -91,18 +91,24 @@ class Clips:
             raise ValueError("clips must hold one list per seed, each with one (scores, "
                              "labels) pair per recording")
         self.shape, self.fn, self.empty = (len(self.clips), len(self.clips[0])), fn, empty
+        # each seed's clips in recording order with their recording's index: a draw is one
+        # np.repeat by per-clip counts (the jackknife's R draws were R x R small repeats)
+        self._flat = [(np.concatenate([s for s, _ in seed]), np.concatenate([y for _, y in seed]),
+                       np.repeat(np.arange(len(seed)), [len(s) for s, _ in seed]))
+                      for seed in self.clips]
 
-    def _one(self, seed: list, counts: np.ndarray) -> float:
-        take = np.flatnonzero(counts)
-        scores = np.concatenate([np.repeat(seed[r][0], int(counts[r])) for r in take])
-        labels = np.concatenate([np.repeat(seed[r][1], int(counts[r])) for r in take])
+    def _one(self, flat: tuple, counts: np.ndarray) -> float:
+        scores, labels, recording = flat
+        times = np.asarray(counts).astype(np.int64)[recording]
+        if not times.any():
+            return self.empty
         try:
-            return float(self.fn(scores, labels))
+            return float(self.fn(np.repeat(scores, times), np.repeat(labels, times)))
         except ValueError:
             return self.empty
 
     def values(self, counts: np.ndarray) -> np.ndarray:
-        return np.array([[self._one(seed, c) for seed in self.clips] for c in counts])
+        return np.array([[self._one(flat, c) for flat in self._flat] for c in counts])
 
 
 @dataclass(frozen=True)
