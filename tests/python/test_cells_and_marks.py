@@ -115,6 +115,7 @@ def test_a_large_constant_shift_is_reproduced_and_its_opposite_is_not(tmp_path):
     worse, better = E.evaluate_findings(tab, res)
     assert worse["difference"] == pytest.approx(10.0, abs=0.1)
     assert (worse["status"], better["status"]) == ("reproduced", "not reproduced")
+    assert (worse["marks"], better["marks"]) == (["reproduced"], ["not reproduced"])
     # every seed of lstm is worse than every seed of poseformer (lower is better)
     assert worse["p_improvement"][0]["value"] == 0.0
     assert status_text(worse).startswith("reproduced (p ")
@@ -126,7 +127,7 @@ def test_three_seeds_are_inconclusive_by_rule(tmp_path):
     f = E.evaluate_findings(tab, _write(tmp_path, tab, {"lstm": _jit(base + 30),
                                                         "poseformer": base}))[0]
     assert f["p_holm"][0] < 0.05  # decided by the interval, inconclusive by the rule
-    assert f["status"] == "inconclusive"
+    assert f["status"] == "inconclusive" and f["marks"] == ["inconclusive"]
     assert f["rule"] == "fewer than 5 seeds (lstm: 3, poseformer: 3)"
     assert "rule: fewer than 5 seeds" in status_text(f)
 

@@ -381,7 +381,7 @@ def _finding(tab, f, c: dict) -> dict:
            "difference": first.value, "interval": [first.low, first.high],
            "interval_seeds": [pieces[0]["seeds_only"].low, pieces[0]["seeds_only"].high],
            "recordings": first.n, "p": [q["test"].p for q in pieces],
-           "p_holm": [q["p_holm"] for q in pieces],
+           "p_holm": [q["p_holm"] for q in pieces], "marks": marks,
            "p_improvement": [None if q["poi"] is None else
                              {"value": q["poi"].value, "interval": [q["poi"].low, q["poi"].high]}
                              for q in pieces]}
@@ -399,11 +399,13 @@ def _finding(tab, f, c: dict) -> dict:
 
 def evaluate_findings(tab: dict, res: dict) -> list:
     """``[{"text", "ours", "report", "status", "rule", "difference", "interval",
-    "interval_seeds", "recordings", "seeds", "p", "p_holm", "p_improvement", ("size")}]``:
+    "interval_seeds", "recordings", "seeds", "p", "p_holm", "marks", "p_improvement",
+    ("size")}]``:
     each finding marked from the two-level t test on the variance components of seeds and
     test recordings (:data:`METHOD`; ``res`` from :func:`summarise`):
     decided when its Holm-adjusted p is below 0.05 and no rule (:func:`~U.rule`) makes it
-    inconclusive. Holm's family: every comparison of the table's confirmatory findings
+    inconclusive; ``marks`` holds each comparison's mark, ``status`` their combination.
+    Holm's family: every comparison of the table's confirmatory findings
     (:func:`.protocol.confirmatory`); the exploratory ones form a family of their own. The
     report column is :func:`findings.evaluate_findings`'s, on the report's numbers."""
     from .findings import evaluate_findings as point_findings
