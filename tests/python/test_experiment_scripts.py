@@ -315,3 +315,46 @@ def test_pose_generalisation_smoke_scores_train_val_and_test(pose_table, tmp_pat
     # --resume scores nothing again
     pg.score = lambda run, linked: pytest.fail("scored again")
     assert pg.main([str(table), "--out", str(tmp_path / "out"), "--resume"]) == 0
+
+
+def _published(name: str) -> Path:
+    return ROOT / "docs" / "results" / f"{name}-quick.json"
+
+
+def test_decided_fraction_counts_the_published_tables_marks():
+    mod = _load("decided_fraction")
+    auto = mod.decided(_published("autoencoder"))
+    doc = json.loads(_published("autoencoder").read_text(encoding="utf-8"))
+    p = [q for f in doc["findings"] if not f.get("exploratory") for q in f["p_holm"]]
+    # no rule holds this table's comparisons: decided is Holm p below 0.05
+    assert all(f["rule"] is None for f in doc["findings"])
+    assert (auto["decided"], auto["comparisons"]) == (sum(q < 0.05 for q in p), len(p))
+    assert auto["hash"] == doc["protocol"]["hash"][:12] and auto["seeds"] == \
+        sorted({len(r["seeds"]) for r in doc["results"].values()})
+
+
+def test_decided_fraction_before_is_the_newest_version_under_another_hash(tmp_path):
+    import shutil
+    import subprocess
+
+    mod = _load("decided_fraction")
+    results = tmp_path / "docs" / "results"
+    results.mkdir(parents=True)
+    git = ["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run(git[:3] + ["init", "-q"], check=True)
+    src = _published("autoencoder")
+    doc = json.loads(src.read_text(encoding="utf-8"))
+    shutil.copy(src.with_name(Path(doc["per_recording"]).name), results)
+    for h in ("a" * 64, "b" * 64, doc["protocol"]["hash"]):  # old, older-but-newer, now
+        (results / src.name).write_text(json.dumps(
+            dict(doc, protocol=dict(doc["protocol"], hash=h))), encoding="utf-8")
+        subprocess.run(git + ["add", "-A"], check=True)
+        subprocess.run(git + ["commit", "-qm", h[:4]], check=True)
+    second = subprocess.run(git + ["rev-parse", "--short=7", "HEAD~1"], check=True,
+                            capture_output=True, text=True).stdout.strip()
+    row = mod.table_row(results, "autoencoder")
+    assert row["before_commit"] == second and row["before"]["hash"] == "b" * 12
+    assert {k: v for k, v in row["before"].items() if k != "hash"} == \
+        {k: v for k, v in row["after"].items() if k != "hash"}
+    a = row["after"]
+    assert f"| autoencoder | {a['decided']} of {a['comparisons']} |" in mod.render([row])
