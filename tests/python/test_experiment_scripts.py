@@ -358,3 +358,21 @@ def test_decided_fraction_before_is_the_newest_version_under_another_hash(tmp_pa
         {k: v for k, v in row["after"].items() if k != "hash"}
     a = row["after"]
     assert f"| autoencoder | {a['decided']} of {a['comparisons']} |" in mod.render([row])
+
+
+def test_the_decided_fractions_in_the_docs_are_the_generated_ones():
+    mod = _load("decided_fraction")
+    rows = json.loads((ROOT / "docs/results/decided_fraction.json").read_text(encoding="utf-8"))
+    assert mod.render(rows) in (ROOT / "docs/results/decided_fraction.md").read_text(
+        encoding="utf-8")
+    text = (ROOT / "docs/reproduce.md").read_text(encoding="utf-8").splitlines()
+    for r in rows:
+        b, a, p = r["before"], r["after"], r["predicted"]
+        # the table's row of five cells (the power table above has rows of four)
+        line = [t for t in text if t.startswith(f"| {r['table']} | {b['decided']} of "
+                                                f"{b['comparisons']} (") and t.count("|") == 6]
+        assert len(line) == 1, r["table"]
+        cells = [c.strip() for c in line[0].strip("|").split("|")]
+        assert cells[2:] == [f"{p['published']} of {p['of']}",
+                             cells[3], f"{p['registered']} of {p['of']}"]
+        assert cells[3].startswith(f"{a['decided']} of {a['comparisons']} (")
