@@ -47,23 +47,23 @@ def decided(path: Path) -> dict:
             "hash": doc["protocol"]["hash"][:12]}
 
 
-def _git(root: Path, *args) -> str:
-    return subprocess.run(["git", "-C", str(root), *args], check=True, capture_output=True,
-                          text=True).stdout
+def _git(root: Path, *args) -> bytes:
+    return subprocess.run(["git", "-C", str(root), *args], check=True,
+                          capture_output=True).stdout
 
 
 def before(results: Path, table: str, into: Path) -> tuple:
     """``(path, commit)``: the newest committed version of the table published under
     another protocol hash than now, with its sums, written into ``into``; or (None, None)."""
-    root = Path(_git(results, "rev-parse", "--show-toplevel").strip())
+    root = Path(_git(results, "rev-parse", "--show-toplevel").decode().strip())
     rel = (results / f"{table}-quick.json").resolve().relative_to(root)
     now = json.loads((results / rel.name).read_text(encoding="utf-8"))["protocol"]["hash"]
-    for commit in _git(root, "log", "--format=%H", "--", str(rel)).split():
+    for commit in _git(root, "log", "--format=%H", "--", str(rel)).decode().split():
         doc = json.loads(_git(root, "show", f"{commit}:{rel}"))
         if doc["protocol"]["hash"] == now:
             continue
         sums = rel.with_name(Path(doc["per_recording"]).name)
-        (into / sums.name).write_text(_git(root, "show", f"{commit}:{sums}"), encoding="utf-8")
+        (into / sums.name).write_bytes(_git(root, "show", f"{commit}:{sums}"))
         out = into / rel.name
         out.write_text(json.dumps(doc), encoding="utf-8")
         return out, commit[:7]

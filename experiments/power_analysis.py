@@ -3,7 +3,7 @@
 item 5), from the published variance components.
 
 For every table file ``experiments/*.yaml`` with a published table
-(``docs/results/TABLE-quick.json`` and its ``.per_recording.json``): each comparison of
+(``docs/results/TABLE-quick.json`` and its ``.per_recording.json.xz``): each comparison of
 each confirmatory finding gets its seed, recording and interaction variance components
 (``variance_components``; the statistic's standard error at S seeds and R recordings is
 about ``sqrt(seed / S + recording / R + interaction / (S R))``). The effect to decide: the

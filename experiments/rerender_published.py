@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Every published table re-rendered with the current statistics from its published sums
 (#56, item 6; no training): for each ``docs/results/TABLE-BUDGET.json`` with its
-``.per_recording.json``, the cells' intervals and the findings are recomputed
+``.per_recording.json.xz``, the cells' intervals and the findings are recomputed
 (``evidence.summarise`` and ``evaluate_findings`` on ``readme.load_published``), written
 back into the JSON and its ``.md``, and every mark that changes is listed.
 
@@ -58,8 +58,8 @@ def main(argv=None) -> int:
     rows, total = [], 0
     for path in sorted(args.results.glob("*.json")):
         doc = json.loads(path.read_text(encoding="utf-8"))
-        if doc.get("format") != RM.FORMAT or not doc.get("per_recording") \
-                or "findings" not in doc:
+        if not isinstance(doc, dict) or doc.get("format") != RM.FORMAT \
+                or not doc.get("per_recording") or "findings" not in doc:
             continue
         old = doc["findings"]
         new_doc, res, found, tab = rerender(path)

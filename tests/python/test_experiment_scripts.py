@@ -1,6 +1,7 @@
 """Smoke versions of the scripts in experiments/ (the long runs live there, not here)."""
 import importlib.util
 import json
+import lzma
 import math
 from pathlib import Path
 
@@ -148,7 +149,7 @@ def test_precision_retrain_difference_by_hand_and_verdicts(tmp_path):
 
 def _fake_published(folder: Path, precision: str, per_seed: dict) -> Path:
     """:func:`_fake_results`' row as a published table: ``lifting-quick.json`` and its
-    ``.per_recording.json`` (what ``bsp-reproduce --publish`` writes), no run folder."""
+    ``.per_recording.json.xz`` (what ``bsp-reproduce --publish`` writes), no run folder."""
     from bsp_fast.reproduction.readme import FORMAT
 
     res = json.loads((_fake_results(folder / "runs", precision, per_seed)
@@ -157,8 +158,9 @@ def _fake_published(folder: Path, precision: str, per_seed: dict) -> Path:
     for seed, s in res["results"]["lstm"]["seeds"].items():
         sums["lstm"][seed] = json.loads(Path(s.pop("per_recording")).read_text())
         s["metrics"] = {"mpjpe_mm": sum(per_seed[int(seed)]) / 4.0}
-    (folder / "lifting-quick.per_recording.json").write_text(json.dumps(sums))
-    doc = dict(res, format=FORMAT, per_recording="lifting-quick.per_recording.json")
+    (folder / "lifting-quick.per_recording.json.xz").write_bytes(
+        lzma.compress(json.dumps(sums).encode()))
+    doc = dict(res, format=FORMAT, per_recording="lifting-quick.per_recording.json.xz")
     (folder / "lifting-quick.json").write_text(json.dumps(doc))
     return folder / "lifting-quick.json"
 

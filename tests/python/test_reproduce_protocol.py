@@ -335,7 +335,8 @@ def test_published_table_renders_into_its_readme_section(finished, monkeypatch):
     doc = json.loads((results_dir / "tiny_ae-smoke.json").read_text())
     assert str(finished["root"]) not in json.dumps(doc)  # no machine's paths
     assert doc["protocol"]["hash"] == P.table_hash(finished["table"])
-    sums = json.loads((results_dir / doc["per_recording"]).read_text())
+    assert doc["per_recording"] == "tiny_ae-smoke.per_recording.json.xz"
+    sums = RM.read_sums(results_dir / doc["per_recording"])
     run = json.loads((base / "clean" / "seed-22742" / "test_per_recording.json").read_text())
     assert sums["clean"]["22742"]["test"]["metrics"]["pck_0.05"] == \
         run["test"]["metrics"]["pck_0.05"]
@@ -442,9 +443,8 @@ def test_with_published_trains_only_the_missing_seeds(finished, two_seeds):
         (other / "runs" / "tiny_ae-smoke" / "results.md").read_text()
     again = json.loads((other / "results" / "tiny_ae-smoke.json").read_text())
     assert list(again["results"]["clean"]["seeds"]) == ["22742", "22743", "22744"]
-    sums = json.loads((other / "results" / "tiny_ae-smoke.per_recording.json").read_text())
-    old_sums = json.loads((two_seeds / "results" / "tiny_ae-smoke.per_recording.json")
-                          .read_text())
+    sums = RM.read_sums(other / "results" / "tiny_ae-smoke.per_recording.json.xz")
+    old_sums = RM.read_sums(two_seeds / "results" / "tiny_ae-smoke.per_recording.json.xz")
     assert sums["clean"]["22742"] == old_sums["clean"]["22742"] and "22744" in sums["clean"]
     # a second call reuses the run trained here and reads the other two again
     code, text, err = _main(argv + ["--with-published", two_seeds / "results"])

@@ -82,7 +82,7 @@ def _output_options(p) -> None:
     --estimate."""
     p.add_argument("--publish", metavar="DIR",
                    help="after the report, copy the finished table into DIR (e.g. docs/results): "
-                        "TABLE-BUDGET.json, .per_recording.json and .md, which "
+                        "TABLE-BUDGET.json, .per_recording.json.xz and .md, which "
                         "python -m bsp_fast.reproduction.readme renders into docs/results.md")
     p.add_argument("--with-published", metavar="DIR",
                    help="with --seeds: take the runs that have no run folder here from the "

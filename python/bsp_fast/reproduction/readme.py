@@ -3,7 +3,7 @@
 ``bsp-reproduce TABLE ... --publish docs/results`` copies a finished table's results into
 ``docs/results/TABLE-BUDGET.json`` (:func:`publish`: what the rendering needs, the
 per-seed summaries, the findings, the protocol; the per-seed, per-recording sums go to the
-sibling ``TABLE-BUDGET.per_recording.json``, the full table to ``TABLE-BUDGET.md``).
+sibling ``TABLE-BUDGET.per_recording.json.xz``, the full table to ``TABLE-BUDGET.md``).
 ``python3 -m bsp_fast.reproduction.readme`` rewrites every section of the results page,
 ``docs/results.md`` (issue #54: the README links it), between
 ``<!-- results:TABLE:begin -->`` and ``<!-- results:TABLE:end -->`` (``results:TABLE/BUDGET``
@@ -24,15 +24,18 @@ import re
 import sys
 from pathlib import Path
 
-from ..atomic import write_text
+from ..atomic import write_bytes, write_text
 from ..reporting.results_page import section_text
 from .protocol import portable_options, table_hash
 from .table_files import load_table
 
-__all__ = ["FORMAT", "MARKER", "PAGE", "default_page", "published_path", "publish",
-           "load_published", "render_section", "render_readme", "differing_sections", "main"]
+__all__ = ["FORMAT", "SUMS_SUFFIX", "MARKER", "PAGE", "default_page", "published_path",
+           "publish", "read_sums", "load_published", "render_section", "render_readme",
+           "differing_sections", "main"]
 
 FORMAT = 1
+#: the per-recording sums beside a published table: TABLE-BUDGET.per_recording.json.xz
+SUMS_SUFFIX = "per_recording.json.xz"
 #: a section's markers; the budget is quick unless named (``results:lifting/full``)
 MARKER = re.compile(r"<!-- results:(?P<key>(?P<table>[\w.-]+)(?:/(?P<budget>\w+))?):begin -->\n"
                     r"(?P<body>.*?)<!-- results:(?P=key):end -->", re.S)
@@ -134,22 +137,44 @@ def publish(tab: dict, run_folder, results_dir) -> Path:
            "finding_specs": tab["findings"], "data": data, "seeds": doc["seeds"],
            "split_seeds": doc.get("split_seeds", False), "protocol": protocol,
            "results": results, "findings": doc["findings"],
-           "per_recording": f"{stem}.per_recording.json" if sums else None}
+           "per_recording": f"{stem}.{SUMS_SUFFIX}" if sums else None}
     results_dir = Path(results_dir)
     results_dir.mkdir(parents=True, exist_ok=True)
     write_text(results_dir / f"{stem}.json", json.dumps(out, indent=1, ensure_ascii=False))
-    if sums:  # compact: the numbers only, for an independent re-computation
-        write_text(results_dir / f"{stem}.per_recording.json",
-                   json.dumps(sums, separators=(",", ":")))
+    if sums:  # the numbers only, for an independent re-computation
+        write_bytes(results_dir / f"{stem}.{SUMS_SUFFIX}", _compressed(sums))
     if (base / "results.md").is_file():
         write_text(results_dir / f"{stem}.md", (base / "results.md").read_text(encoding="utf-8"))
     return results_dir / f"{stem}.json"
 
 
+def _compressed(sums: dict) -> bytes:
+    import lzma
+
+    # the sums name every test recording per seed and score every clip: xz keeps a
+    # 10-seed table at 415 recordings near 2 MB instead of 14
+    return lzma.compress(json.dumps(sums, separators=(",", ":")).encode("utf-8"),
+                         preset=9)
+
+
+def read_sums(path) -> dict:
+    """A published table's per-recording sums: the JSON file its ``per_recording`` names,
+    xz-compressed when the name ends in ``.xz`` (tables published before 2026-11-29 in git's
+    history are plain JSON). ValueError naming the file when it cannot be read."""
+    import lzma
+
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+        return json.loads(lzma.decompress(data) if path.suffix == ".xz" else data)
+    except (OSError, ValueError, lzma.LZMAError) as e:
+        raise ValueError(f"{path}: cannot read the table's sums ({e})") from e
+
+
 def load_published(path) -> dict:
     """A published table (``TABLE-BUDGET.json``) read back as a ``results.json``: each
-    seed's ``per_recording`` holds its sums from the sibling ``.per_recording.json``
-    (already read), so that :mod:`.evidence` recomputes intervals and re-run differences
+    seed's ``per_recording`` holds its sums from the sibling file the table names
+    (:func:`read_sums`, already read), so that :mod:`.evidence` recomputes intervals and re-run differences
     from a published table whose run folder is gone (another machine's). ValueError when
     the file is not a published table of this format or its sums are missing."""
     path = Path(path)
@@ -162,11 +187,7 @@ def load_published(path) -> dict:
                          "(bsp-reproduce ... --publish writes them)")
     if not doc.get("per_recording"):
         raise ValueError(f"{path}: published without per-recording sums")
-    sums_path = path.parent / Path(doc["per_recording"]).name
-    try:
-        sums = json.loads(sums_path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as e:
-        raise ValueError(f"{sums_path}: cannot read the table's sums ({e})") from e
+    sums = read_sums(path.parent / Path(doc["per_recording"]).name)
     for name, r in doc["results"].items():
         src = r.get("run_of") or name  # a row read from another row's trivial baseline
         for seed, s in r["seeds"].items():
