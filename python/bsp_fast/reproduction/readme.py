@@ -174,9 +174,10 @@ def read_sums(path) -> dict:
 def load_published(path) -> dict:
     """A published table (``TABLE-BUDGET.json``) read back as a ``results.json``: each
     seed's ``per_recording`` holds its sums from the sibling file the table names
-    (:func:`read_sums`, already read), so that :mod:`.evidence` recomputes intervals and re-run differences
-    from a published table whose run folder is gone (another machine's). ValueError when
-    the file is not a published table of this format or its sums are missing."""
+    (:func:`read_sums`, already read), so that :mod:`.evidence` recomputes intervals and
+    re-run differences from a published table whose run folder is gone (another
+    machine's). ValueError when the file is not a published table of this format or its
+    sums are missing."""
     path = Path(path)
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
